@@ -1,0 +1,348 @@
+"""``icrsumo convert-routes``: leaderboard route XML -> runnable SUMO scenarios.
+
+Output layout of ``OUT``::
+
+    OUT/networks/<name>.net.xml          networks the scenarios use (copied / converted once)
+    OUT/scenarios/<route id>/scenario.json     the manifest (see README)
+    OUT/scenarios/<route id>/scenario.sumocfg  runs in plain ``sumo -c``
+    OUT/scenarios/<route id>/ego.rou.xml       ego vType and route ``ego_route``
+    OUT/scenarios/<route id>/vehicles.rou.xml  background cars (randomTrips + duarouter)
+    OUT/scenarios/<route id>/pedestrians.rou.xml  pedestrians, where the town has sidewalks
+    OUT/index.json                       converted scenarios in file order, and failures
+
+Every scenario folder appears whole or not at all (written to a staging folder, then renamed).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import shutil
+import tempfile
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from .errors import InputError
+from .fsio import dumps_json, replace_dir_atomic, sha256_file, write_atomic
+from .networks import convert_xodr, load_net
+from .resources import bundled_towns
+from .routes import read_routes
+from .routing import MatchError, plan_route
+from .scenario import MANIFEST, SCENARIO_FORMAT
+from .traffic import TRAFFIC_LEVELS, make_traffic
+from .types import RouteSpec
+
+#: bump when the scenario output changes for the same input, to invalidate reuse
+CONVERTER_VERSION = 1
+#: simulation step length (s) written into the .sumocfg: 20 Hz, as the CARLA Leaderboard
+STEP_LENGTH = 0.05
+#: ego vehicle footprint (m), a mid-size car as CARLA's Lincoln MKZ
+EGO_LENGTH, EGO_WIDTH = 4.9, 2.1
+
+
+@dataclass(frozen=True)
+class ConvertOptions:
+    """Options of one conversion. ``max_snap`` in m, ``warmup`` in s."""
+
+    coords: str = "sumo"
+    traffic: str = "normal"
+    net: Path | None = None
+    xodr: Path | None = None
+    net_dir: Path | None = None
+    max_snap: float = 10.0
+    seed: int = 0
+    warmup: float = 20.0
+    workers: int = 1
+
+    def check(self) -> None:
+        if self.coords not in ("sumo", "carla"):
+            raise InputError("--coords", "", f"unknown value {self.coords!r}", "use sumo or carla")
+        if self.traffic not in TRAFFIC_LEVELS:
+            raise InputError("--traffic", "", f"unknown level {self.traffic!r}",
+                             f"use one of {', '.join(TRAFFIC_LEVELS)}")
+        if sum(x is not None for x in (self.net, self.xodr, self.net_dir)) > 1:
+            raise InputError("--net/--xodr/--net-dir", "", "more than one network source given",
+                             "give only one of --net, --xodr, --net-dir")
+        if not self.max_snap > 0:
+            raise InputError("--max-snap", "", "must be positive", "give a distance in metres")
+        if self.warmup < 0:
+            raise InputError("--warmup", "", "must not be negative", "give seconds >= 0")
+        if self.workers < 1:
+            raise InputError("--workers", "", "must be at least 1", "give a positive count")
+
+
+@dataclass
+class ConvertReport:
+    """What a conversion did: scenario folder names converted or reused, and failures."""
+
+    converted: list[str] = field(default_factory=list)
+    reused: list[str] = field(default_factory=list)
+    failures: list[str] = field(default_factory=list)
+
+
+def route_seed(base: int, route_id: str) -> int:
+    """Per-route simulator / traffic seed, stable across machines and Python versions."""
+    digest = hashlib.sha256(f"{base}/{route_id}".encode()).digest()
+    return int.from_bytes(digest[:4], "big") % 2_000_000_000
+
+
+def safe_name(route_id: str) -> str:
+    """Folder name for a route id (letters, digits, ``-_.`` kept; others become ``_``)."""
+    name = re.sub(r"[^A-Za-z0-9_.-]", "_", route_id)
+    return name if name not in ("", ".", "..") else f"route_{name}"
+
+
+def _route_timeout(length_m: float) -> float:
+    """Leaderboard route timeout (s): 0.8 s per metre + 5 s."""
+    return 0.8 * length_m + 5.0
+
+
+def _resolve_nets(
+    specs: list[RouteSpec], opts: ConvertOptions, routes_file: Path, net_store: Path
+) -> tuple[dict[str, tuple[Path, str]], dict[str, InputError]]:
+    """Map each route id to (source net path, network name); unresolvable routes -> errors."""
+    resolved: dict[str, tuple[Path, str]] = {}
+    errors: dict[str, InputError] = {}
+    if opts.net is not None:
+        if not Path(opts.net).is_file():
+            raise InputError(opts.net, "", "network file not found", "check the --net path")
+        name = Path(opts.net).name.removesuffix(".xml").removesuffix(".net")
+        return {s.id: (Path(opts.net), name) for s in specs}, errors
+    if opts.xodr is not None:
+        net = convert_xodr(Path(opts.xodr), net_store)
+        return {s.id: (net, Path(opts.xodr).stem) for s in specs}, errors
+    towns = bundled_towns()
+    for s in specs:
+        place = f"route {s.id}"
+        if not s.town:
+            errors[s.id] = InputError(routes_file, place, "missing attribute 'town'",
+                                      "add town=\"...\" or pass --net FILE.net.xml")
+            continue
+        if opts.net_dir is not None:
+            d = Path(opts.net_dir)
+            net_file, xodr = d / f"{s.town}.net.xml", d / f"{s.town}.xodr"
+            if net_file.is_file():
+                resolved[s.id] = (net_file, s.town)
+            elif xodr.is_file():
+                try:
+                    resolved[s.id] = (convert_xodr(xodr, net_store), s.town)
+                except InputError as err:
+                    errors[s.id] = err
+            else:
+                errors[s.id] = InputError(
+                    routes_file, place, f"town {s.town!r} has no {net_file.name} or {xodr.name} "
+                    f"in {d}", "add the town's network there",
+                )
+        elif s.town in towns:
+            resolved[s.id] = (towns[s.town], s.town)
+        else:
+            errors[s.id] = InputError(
+                routes_file, place, f"unknown town {s.town!r}",
+                f"use a bundled town ({', '.join(towns)}) or pass --net FILE.net.xml, "
+                "--xodr FILE.xodr or --net-dir DIR",
+            )
+    return resolved, errors
+
+
+def _place_net(src: Path, name: str, net_store: Path) -> Path:
+    """The copy of network ``src`` inside ``OUT/networks`` (written once, atomically)."""
+    if src.parent.resolve() == net_store.resolve():
+        return src
+    dst = net_store / f"{name}.net.xml"
+    if not dst.is_file() or sha256_file(dst) != sha256_file(src):
+        write_atomic(dst, src.read_bytes())
+    return dst
+
+
+def _source_hash(spec: RouteSpec, net_sha: str, opts: ConvertOptions) -> str:
+    payload = {
+        "v": CONVERTER_VERSION, "net": net_sha, "id": spec.id, "town": spec.town,
+        "wps": [asdict(w) for w in spec.waypoints], "weather": spec.weather,
+        "coords": opts.coords, "traffic": opts.traffic, "snap": opts.max_snap,
+        "seed": opts.seed, "warmup": opts.warmup,
+    }
+    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
+
+
+def _sumocfg(net_rel: str, route_files: list[str], seed: int, end: float) -> str:
+    files = ",".join(route_files)
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<configuration>
+    <input>
+        <net-file value="{net_rel}"/>
+        <route-files value="{files}"/>
+    </input>
+    <time>
+        <begin value="0"/>
+        <end value="{end:.0f}"/>
+        <step-length value="{STEP_LENGTH}"/>
+    </time>
+    <processing>
+        <collision.action value="warn"/>
+        <collision.check-junctions value="true"/>
+        <time-to-teleport value="300"/>
+    </processing>
+    <random_number>
+        <seed value="{seed}"/>
+    </random_number>
+    <report>
+        <no-step-log value="true"/>
+        <duration-log.disable value="true"/>
+        <no-warnings value="true"/>
+    </report>
+</configuration>
+"""
+
+
+def _ego_routes(edges: tuple[str, ...]) -> str:
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<routes>
+    <vType id="ego" vClass="passenger" length="{EGO_LENGTH}" width="{EGO_WIDTH}" color="1,0,0"/>
+    <route id="ego_route" edges="{' '.join(edges)}"/>
+</routes>
+"""
+
+
+def _convert_one(
+    spec: RouteSpec, routes_file: str, net_path: str, town: str, out_dir: str,
+    opts: ConvertOptions,
+) -> tuple[str, str, str]:
+    """Convert one route (runs in a worker process). Returns (status, folder name, message)
+    with status 'converted', 'reused' or 'failed'."""
+    name = safe_name(spec.id)
+    final = Path(out_dir) / "scenarios" / name
+    try:
+        net = load_net(Path(net_path))
+        source_hash = _source_hash(spec, net.sha256, opts)
+        old = final / MANIFEST
+        if old.is_file():
+            try:
+                if json.loads(old.read_text(encoding="utf-8")).get("source_hash") == source_hash:
+                    return "reused", name, ""
+            except (OSError, json.JSONDecodeError):
+                pass
+        pts = [net.to_sumo(w.x, w.y, w.yaw, opts.coords) for w in spec.waypoints]
+        try:
+            route = plan_route(net, pts, opts.max_snap)
+        except MatchError as err:
+            place = f"route {spec.id}, waypoint {err.index}"
+            fix = ("move the waypoint onto a road, check --coords, or raise --max-snap"
+                   if err.kind == "far" else
+                   "check the waypoint order and that the network connects them")
+            raise InputError(routes_file, place, err.detail, fix) from None
+        seed = route_seed(opts.seed, spec.id)
+        end = opts.warmup + _route_timeout(route.length) + 60.0
+        staging = Path(tempfile.mkdtemp(prefix=f".{name}.", dir=final.parent))
+        try:
+            traffic = make_traffic(
+                net.path, net.lane_km, net.edge_km, net.has_sidewalks, staging, seed,
+                opts.traffic, end,
+            )
+            net_rel = os.path.relpath(net.path, final)
+            route_files = ["ego.rou.xml"] + [f for f in (traffic.vehicles, traffic.pedestrians) if f]
+            (staging / "ego.rou.xml").write_text(_ego_routes(route.edges), encoding="utf-8")
+            (staging / "scenario.sumocfg").write_text(
+                _sumocfg(net_rel, route_files, seed, end), encoding="utf-8")
+            manifest = {
+                "format": SCENARIO_FORMAT,
+                "route_id": spec.id,
+                "town": spec.town or town,
+                "source": {"file": Path(routes_file).name, "index": spec.index,
+                           "coords": opts.coords},
+                "net": net_rel,
+                "net_sha256": net.sha256,
+                "sumocfg": "scenario.sumocfg",
+                "seed": seed,
+                "step_length": STEP_LENGTH,
+                "weather": dict(spec.weather),
+                "waypoints": [[round(x, 2), round(y, 2)] for x, y, _ in pts],
+                "ego": {
+                    "vtype": "ego", "route": "ego_route", "depart": opts.warmup,
+                    "length": EGO_LENGTH, "width": EGO_WIDTH,
+                    "edges": list(route.edges), "lanes": [list(x) for x in route.lanes],
+                    "lane_path": list(route.lane_path),
+                    "start": asdict(route.start), "end": asdict(route.end),
+                },
+                "route": {"length": route.length, "timeout": round(_route_timeout(route.length), 2),
+                          "polyline": [list(p) for p in route.polyline]},
+                "junctions": [asdict(j) for j in route.junctions],
+                "lane_changes": [dict(asdict(c), direction=c.direction) for c in route.lane_changes],
+                "traffic": {"level": opts.traffic, "vehicles": traffic.vehicles,
+                            "pedestrians": traffic.pedestrians,
+                            "n_vehicles": traffic.n_vehicles,
+                            "n_pedestrians": traffic.n_pedestrians, "begin": 0.0, "end": end},
+                "source_hash": source_hash,
+            }
+            (staging / MANIFEST).write_text(dumps_json(manifest), encoding="utf-8")
+            replace_dir_atomic(staging, final)
+        finally:
+            if staging.exists():
+                shutil.rmtree(staging, ignore_errors=True)
+        return "converted", name, ""
+    except InputError as err:
+        return "failed", name, err.line()
+    except Exception as err:  # a simulator tool failed: report it for this route, go on
+        return "failed", name, f"{routes_file}: route {spec.id}: {type(err).__name__}: {err}"
+
+
+def convert_routes(routes_file: Path, out_dir: Path, opts: ConvertOptions) -> ConvertReport:
+    """Convert every route of ``routes_file`` into ``out_dir``; bad routes are reported in the
+    returned report and do not stop the others. File-level problems raise InputError before
+    anything is written."""
+    opts.check()
+    routes_file = Path(routes_file)
+    out_dir = Path(out_dir)
+    specs, parse_errors = read_routes(routes_file)
+    net_store = out_dir / "networks"
+    net_store.mkdir(parents=True, exist_ok=True)
+    (out_dir / "scenarios").mkdir(parents=True, exist_ok=True)
+    for stale in (out_dir / "scenarios").glob(".*"):  # staging left by a killed run
+        shutil.rmtree(stale, ignore_errors=True)
+    resolved, net_errors = _resolve_nets(specs, opts, routes_file, net_store)
+    placed: dict[Path, Path] = {}
+    jobs = []
+    for s in specs:
+        if s.id in resolved:
+            src, name = resolved[s.id]
+            if src not in placed:
+                placed[src] = _place_net(src, name, net_store)
+            jobs.append((s, str(routes_file), str(placed[src]), name, str(out_dir), opts))
+    names = [safe_name(s.id) for s in specs]
+    clash = {n for n in names if names.count(n) > 1}
+    failed: list[tuple[int, str]] = [(i, e.line()) for i, e in parse_errors]
+    ok_jobs = []
+    for job in jobs:
+        if safe_name(job[0].id) in clash:
+            failed.append((job[0].index, InputError(
+                routes_file, f"route {job[0].id}", "route id maps to the same folder name as "
+                "another route", "make route ids differ in letters or digits").line()))
+        else:
+            ok_jobs.append(job)
+    results: dict[str, tuple[str, str, str]] = {}
+    with ProcessPoolExecutor(max_workers=min(opts.workers, max(1, len(ok_jobs)))) as pool:
+        futures = {job[0].id: pool.submit(_convert_one, *job) for job in ok_jobs}
+        for rid, fut in futures.items():
+            results[rid] = fut.result()
+    report = ConvertReport()
+    index = []
+    for s in specs:
+        if s.id in net_errors:
+            failed.append((s.index, net_errors[s.id].line()))
+            continue
+        if s.id not in results:
+            continue
+        status, name, msg = results[s.id]
+        if status == "failed":
+            failed.append((s.index, msg))
+            continue
+        (report.converted if status == "converted" else report.reused).append(name)
+        index.append({"id": s.id, "town": s.town, "dir": f"scenarios/{name}"})
+    report.failures = [msg for _, msg in sorted(failed)]
+    write_atomic(out_dir / "index.json", dumps_json({
+        "format": "icrsumo-index/1", "routes_file": routes_file.name,
+        "scenarios": index, "failures": report.failures,
+    }))
+    return report

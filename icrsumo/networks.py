@@ -1,0 +1,340 @@
+"""SUMO road networks: loading (sumolib), lane geometry, the passenger-car edge graph,
+CARLA<->SUMO coordinates and OpenDRIVE conversion with a cache.
+
+Coordinates are SUMO's (right-handed, metres). Headings are radians counter-clockwise from +x.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import heapq
+import math
+import os
+import subprocess
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .fsio import sha256_file, strip_header_comments, write_atomic
+from .resources import sumo_binary, sumo_home
+
+#: vehicle class of the ego and of background cars
+EGO_VCLASS = "passenger"
+
+#: netconvert options for OpenDRIVE files made by CARLA: driving lanes only, no U-turns,
+#: CARLA's own curve resolution and radius fix, original ids kept as lane parameters
+XODR_OPTIONS = (
+    "--opendrive.import-all-lanes", "false",
+    "--no-turnarounds", "true",
+    "--junctions.join", "true",
+    "--opendrive.curve-resolution", "1",
+    "--geometry.min-radius.fix", "true",
+    "--output.original-names", "true",
+)
+
+
+@dataclass(frozen=True)
+class Connection:
+    """A passenger-car connection between two normal edges (lane indices, via lane, direction)."""
+
+    from_edge: str
+    to_edge: str
+    from_lane: int
+    to_lane: int
+    via: str
+    via_length: float
+    direction: str
+
+
+def _check_not_entity_xml(path: Path) -> None:
+    """Reject network files that declare a DTD or entities (sumolib's SAX parser would read them)."""
+    with open(path, "rb") as fh:
+        head = fh.read(8192)
+    if b"<!DOCTYPE" in head or b"<!ENTITY" in head:
+        raise InputError(path, "header", "declares a DOCTYPE/ENTITY", "remove the DTD declarations")
+
+
+def _polyline_cumlen(shape: np.ndarray) -> np.ndarray:
+    seg = np.hypot(*np.diff(shape, axis=0).T) if len(shape) > 1 else np.zeros(0)
+    return np.concatenate([[0.0], np.cumsum(seg)])
+
+
+class RoadNet:
+    """A loaded SUMO network with the queries the converter and the simulator need."""
+
+    def __init__(self, path: Path) -> None:
+        import sumolib  # sumolib's net reader; pure Python
+
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise InputError(self.path, "", "network file not found", "check the path or --net")
+        _check_not_entity_xml(self.path)
+        try:
+            net = sumolib.net.readNet(str(self.path), withInternal=True)
+        except Exception as err:  # sumolib raises assorted errors on bad input
+            raise InputError(
+                self.path, "", f"not a readable SUMO network ({type(err).__name__}: {err})",
+                "give a .net.xml written by netconvert",
+            ) from None
+        self.sha256 = sha256_file(self.path)
+        off = net.getLocationOffset()
+        #: SUMO netOffset (x, y) in m: x_sumo = x_carla + off_x, y_sumo = -y_carla + off_y
+        self.offset = (float(off[0]), float(off[1]))
+        self._net = net
+        self.edge_length: dict[str, float] = {}
+        self.edge_speed: dict[str, float] = {}
+        self.passenger_lanes: dict[str, tuple[int, ...]] = {}
+        self.edge_to_node: dict[str, str] = {}
+        self.node_type: dict[str, str] = {}
+        self.lane_shape: dict[str, np.ndarray] = {}
+        self.lane_length: dict[str, float] = {}
+        self.connections: dict[tuple[str, str], tuple[Connection, ...]] = {}
+        self.successors: dict[str, tuple[str, ...]] = {}
+        self.via_edges: dict[str, tuple[str, str]] = {}
+        self.roundabout_edges: frozenset[str] = frozenset(
+            e for r in net.getRoundabouts() for e in r.getEdges()
+        )
+        self.has_sidewalks = False
+        self._load(net)
+        self._build_segments()
+
+    # ----------------------------------------------------------------- loading
+    def _load(self, net) -> None:
+        for node in net.getNodes():
+            self.node_type[node.getID()] = node.getType()
+        for edge in net.getEdges(withInternal=True):
+            for lane in edge.getLanes():
+                if lane.allows(EGO_VCLASS):
+                    self.lane_shape[lane.getID()] = np.asarray(lane.getShape(), dtype=float)[:, :2]
+                    self.lane_length[lane.getID()] = float(lane.getLength())
+            if edge.getFunction() != "":
+                continue
+            eid = edge.getID()
+            lanes = edge.getLanes()
+            if any(ln.allows("pedestrian") and not ln.allows(EGO_VCLASS) for ln in lanes):
+                self.has_sidewalks = True
+            car = tuple(ln.getIndex() for ln in lanes if ln.allows(EGO_VCLASS))
+            if not car:
+                continue
+            self.passenger_lanes[eid] = car
+            self.edge_length[eid] = float(edge.getLength())
+            self.edge_speed[eid] = float(edge.getSpeed())
+            self.edge_to_node[eid] = edge.getToNode().getID()
+        for eid in sorted(self.passenger_lanes):
+            edge = net.getEdge(eid)
+            conns: dict[str, list[Connection]] = {}
+            for to_edge, clist in edge.getOutgoing().items():
+                tid = to_edge.getID()
+                if tid not in self.passenger_lanes:
+                    continue
+                for c in clist:
+                    fl, tl = c.getFromLane(), c.getToLane()
+                    if not (fl.allows(EGO_VCLASS) and tl.allows(EGO_VCLASS)):
+                        continue
+                    via = c.getViaLaneID() or ""
+                    via_len = self.lane_length.get(via, 0.0)
+                    conns.setdefault(tid, []).append(
+                        Connection(eid, tid, fl.getIndex(), tl.getIndex(), via, via_len,
+                                   c.getDirection())
+                    )
+                    if via:
+                        self.via_edges[via] = (eid, tid)
+            for tid, clist in conns.items():
+                self.connections[(eid, tid)] = tuple(
+                    sorted(clist, key=lambda c: (c.from_lane, c.to_lane))
+                )
+            self.successors[eid] = tuple(sorted(conns))
+
+    def _build_segments(self) -> None:
+        """Flatten every passenger lane into segment arrays for vectorised projection."""
+        a, b, lane_idx, start = [], [], [], []
+        self._lane_ids = sorted(self.lane_shape)
+        for i, lid in enumerate(self._lane_ids):
+            shape = self.lane_shape[lid]
+            if len(shape) < 2:
+                continue
+            cum = _polyline_cumlen(shape)
+            a.append(shape[:-1])
+            b.append(shape[1:])
+            lane_idx.append(np.full(len(shape) - 1, i))
+            start.append(cum[:-1])
+        self._seg_a = np.concatenate(a)
+        self._seg_b = np.concatenate(b)
+        self._seg_lane = np.concatenate(lane_idx)
+        self._seg_start = np.concatenate(start)
+
+    # ----------------------------------------------------------------- geometry
+    @property
+    def lane_km(self) -> float:
+        """Total length of passenger-car lanes on normal edges (km)."""
+        return sum(
+            self.lane_length[f"{e}_{i}"] for e, idx in self.passenger_lanes.items() for i in idx
+        ) / 1000.0
+
+    @property
+    def edge_km(self) -> float:
+        """Total length of normal edges that cars may use (km)."""
+        return sum(self.edge_length.values()) / 1000.0
+
+    @property
+    def sumolib_net(self):
+        """The underlying ``sumolib.net.Net``."""
+        return self._net
+
+    def to_sumo(self, x: float, y: float, yaw_deg: float | None, coords: str):
+        """File coordinates -> SUMO (x, y in m, heading in rad or None).
+
+        ``coords='sumo'``: x, y as given, yaw in degrees counter-clockwise from +x.
+        ``coords='carla'``: CARLA's left-handed frame: x + off_x, -y + off_y, heading -yaw.
+        """
+        if coords == "carla":
+            ox, oy = self.offset
+            heading = None if yaw_deg is None else -math.radians(yaw_deg)
+            return x + ox, -y + oy, heading
+        return x, y, None if yaw_deg is None else math.radians(yaw_deg)
+
+    def to_file_coords(self, x: float, y: float, heading: float, coords: str):
+        """Inverse of :meth:`to_sumo`: SUMO pose -> (x, y, yaw in degrees) in file coordinates."""
+        if coords == "carla":
+            ox, oy = self.offset
+            return x - ox, -(y - oy), -math.degrees(heading)
+        return x, y, math.degrees(heading)
+
+    def lane_pose(self, lane: str, pos: float) -> tuple[float, float, float]:
+        """World (x, y, heading) at lane position ``pos`` (m from the lane start)."""
+        shape = self.lane_shape[lane]
+        cum = _polyline_cumlen(shape)
+        s = float(np.clip(pos * cum[-1] / max(self.lane_length[lane], 1e-9), 0.0, cum[-1]))
+        k = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(shape) - 2))
+        seg = shape[k + 1] - shape[k]
+        seg_len = max(cum[k + 1] - cum[k], 1e-9)
+        p = shape[k] + seg * ((s - cum[k]) / seg_len)
+        return float(p[0]), float(p[1]), math.atan2(seg[1], seg[0])
+
+    def lane_slice(self, lane: str, a: float, b: float) -> np.ndarray:
+        """Lane centre line between lane positions a <= b (m), shape (N, 2)."""
+        shape = self.lane_shape[lane]
+        cum = _polyline_cumlen(shape)
+        scale = cum[-1] / max(self.lane_length[lane], 1e-9)
+        sa, sb = float(np.clip(a * scale, 0, cum[-1])), float(np.clip(b * scale, 0, cum[-1]))
+        inner = shape[(cum > sa) & (cum < sb)]
+        pa = np.array(self.lane_pose(lane, a)[:2])
+        pb = np.array(self.lane_pose(lane, b)[:2])
+        return np.vstack([pa, inner, pb])
+
+    def project(self, x: float, y: float, radius: float) -> list[tuple[str, float, float, float]]:
+        """Passenger lanes within ``radius`` m of (x, y): (lane, pos m, distance m, heading rad),
+        one entry per lane (its closest point), nearest first."""
+        p = np.array([x, y])
+        ab = self._seg_b - self._seg_a
+        ab2 = np.maximum((ab * ab).sum(axis=1), 1e-12)
+        t = np.clip(((p - self._seg_a) * ab).sum(axis=1) / ab2, 0.0, 1.0)
+        closest = self._seg_a + ab * t[:, None]
+        dist = np.hypot(*(closest - p).T)
+        near = np.nonzero(dist <= radius)[0]
+        best: dict[int, int] = {}
+        for s in near[np.argsort(dist[near], kind="stable")]:
+            best.setdefault(int(self._seg_lane[s]), int(s))
+        out = []
+        for li, s in best.items():
+            lid = self._lane_ids[li]
+            shape_len = _polyline_cumlen(self.lane_shape[lid])[-1]
+            s_along = self._seg_start[s] + t[s] * math.sqrt(ab2[s])
+            pos = s_along * self.lane_length[lid] / max(shape_len, 1e-9)
+            out.append((lid, float(pos), float(dist[s]), math.atan2(ab[s, 1], ab[s, 0])))
+        out.sort(key=lambda c: (c[2], c[0]))
+        return out
+
+    # ----------------------------------------------------------------- graph
+    def via_length(self, from_edge: str, to_edge: str) -> float:
+        """Shortest junction-internal length (m) between two connected edges."""
+        return min(c.via_length for c in self.connections[(from_edge, to_edge)])
+
+    def shortest_paths(
+        self, source: str, source_pos: float, targets: set[str]
+    ) -> dict[str, tuple[float, tuple[str, ...]]]:
+        """Dijkstra from lane position ``source_pos`` on edge ``source`` to the START of each
+        target edge: target -> (distance m, edges strictly between source and target).
+
+        The source edge itself is a valid target only by driving a loop back to it.
+        """
+        rest = self.edge_length[source] - source_pos
+        dist: dict[str, float] = {}
+        pred: dict[str, str] = {}
+        heap = []
+        for n in self.successors.get(source, ()):
+            heapq.heappush(heap, (rest + self.via_length(source, n), n, source))
+        remaining = set(targets)
+        while heap and remaining:
+            d, e, p = heapq.heappop(heap)
+            if e in dist:
+                continue
+            dist[e] = d
+            pred[e] = p
+            remaining.discard(e)
+            base = d + self.edge_length[e]
+            for n in self.successors.get(e, ()):
+                if n not in dist:
+                    heapq.heappush(heap, (base + self.via_length(e, n), n, e))
+        out = {}
+        for t in targets:
+            if t not in dist:
+                continue
+            chain = []
+            e = pred[t]
+            while e != source:
+                chain.append(e)
+                e = pred[e]
+            out[t] = (dist[t], tuple(reversed(chain)))
+        return out
+
+
+@lru_cache(maxsize=16)
+def _load_cached(path: str, mtime_ns: int, size: int) -> RoadNet:
+    return RoadNet(Path(path))
+
+
+def load_net(path: Path) -> RoadNet:
+    """Load (and cache per process) the network at ``path``."""
+    p = Path(path).resolve()
+    if not p.is_file():
+        raise InputError(path, "", "network file not found", "check the path or --net")
+    st = p.stat()
+    return _load_cached(str(p), st.st_mtime_ns, st.st_size)
+
+
+def convert_xodr(xodr: Path, cache_dir: Path) -> Path:
+    """Convert an OpenDRIVE file with netconvert once; later calls reuse the cached net.
+
+    The cache key is the SHA-256 of the file's bytes and of the netconvert options.
+    """
+    xodr = Path(xodr)
+    if not xodr.is_file():
+        raise InputError(xodr, "", "OpenDRIVE file not found", "check the --xodr path")
+    key = hashlib.sha256(
+        bytes.fromhex(sha256_file(xodr)) + " ".join(XODR_OPTIONS).encode()
+    ).hexdigest()[:16]
+    out = Path(cache_dir) / f"{xodr.stem}-{key}.net.xml"
+    if out.is_file():
+        return out
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.tmp.net.xml")
+    env = dict(os.environ, PROJ_LIB=str(sumo_home() / "data" / "proj"))
+    proc = subprocess.run(
+        [sumo_binary("netconvert"), "--opendrive-files", str(xodr), *XODR_OPTIONS,
+         "--output-file", str(tmp), "--no-warnings", "true"],
+        capture_output=True, text=True, env=env,
+    )
+    if proc.returncode != 0 or not tmp.is_file():
+        tmp.unlink(missing_ok=True)
+        msg = (proc.stderr or proc.stdout).strip().splitlines()
+        raise InputError(
+            xodr, "", f"netconvert failed: {msg[-1] if msg else 'no output'}",
+            "check that the file is valid OpenDRIVE",
+        )
+    write_atomic(out, strip_header_comments(tmp.read_text(encoding="utf-8")))
+    tmp.unlink()
+    return out
