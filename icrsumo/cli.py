@@ -37,6 +37,31 @@ def _cmd_convert_routes(args: argparse.Namespace) -> int:
     return 2 if report.failures else 0
 
 
+def _cmd_generate(args: argparse.Namespace) -> int:
+    from .instructions.generate import GenerateOptions, generate
+
+    families = tuple(f for item in args.families for f in item.split(",") if f)
+    llm = None
+    if args.generator == "llm":
+        from .instructions.llm import LLMConfig
+
+        if not args.endpoint or not args.model:
+            raise InputError("--generator llm", "", "needs --endpoint URL and --model NAME",
+                             "give the chat-completions server and model")
+        llm = LLMConfig(endpoint=args.endpoint, model=args.model,
+                        cache_dir=Path(args.cache or Path(args.out) / "llm_cache"),
+                        api_key=os.environ.get("ICRSUMO_LLM_API_KEY"))
+    opts = GenerateOptions(families=families, k=args.k, seed=args.seed, templates=args.templates,
+                           workers=args.workers, llm=llm)
+    t0 = time.perf_counter()
+    written, failures = generate(Path(args.scenarios), Path(args.out), opts)
+    print(f"{len(written)} routes x (1 + {len(families)} x {args.k}) sequences, {len(failures)} failed "
+          f"in {time.perf_counter() - t0:.1f} s -> {args.out}", file=sys.stderr)
+    for line in failures:
+        print(line, file=sys.stderr)
+    return 2 if failures else 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="icrsumo",
@@ -68,6 +93,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="worker processes (default: number of cores)")
     p.set_defaults(func=_cmd_convert_routes)
+
+    g = sub.add_parser(
+        "generate", help="baseline instructions + counterfactual variants per route",
+        description="Write, per converted route, the baseline instruction sequence and K variant "
+        "sequences per family (paraphrase, ambiguity, noise, misleading).",
+    )
+    g.add_argument("scenarios", help="folder written by convert-routes (or one scenario folder)")
+    g.add_argument("--out", required=True, help="output folder")
+    g.add_argument("--families", nargs="+", default=["paraphrase,ambiguity,noise,misleading"],
+                   help="families, space or comma separated (default: all four)")
+    g.add_argument("--k", type=int, default=8, help="variants per family (default 8)")
+    g.add_argument("--seed", type=int, default=2026, help="seed of all draws (default 2026)")
+    g.add_argument("--templates", type=Path, help="folder with your own template banks")
+    g.add_argument("--generator", choices=["templates", "llm"], default="templates")
+    g.add_argument("--endpoint", help="OpenAI-compatible base URL, e.g. http://127.0.0.1:8000/v1")
+    g.add_argument("--model", help="model name for --generator llm")
+    g.add_argument("--cache", type=Path, help="LLM answer cache (default OUT/llm_cache)")
+    g.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    g.set_defaults(func=_cmd_generate)
     return parser
 
 

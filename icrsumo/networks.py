@@ -38,7 +38,10 @@ XODR_OPTIONS = (
 
 @dataclass(frozen=True)
 class Connection:
-    """A passenger-car connection between two normal edges (lane indices, via lane, direction)."""
+    """A passenger-car connection between two normal edges: lane indices, first internal
+    (``via``) lane, SUMO direction (s, l, r, t, L, R) and static state (M major, m minor,
+    s stop, w all-way stop, o traffic light), the controlling traffic light and link index
+    (or "" / -1), and every internal lane the connection runs through (``via_chain``)."""
 
     from_edge: str
     to_edge: str
@@ -47,6 +50,10 @@ class Connection:
     via: str
     via_length: float
     direction: str
+    state: str = ""
+    tls: str = ""
+    link_index: int = -1
+    via_chain: tuple[str, ...] = ()
 
 
 def _check_not_entity_xml(path: Path) -> None:
@@ -98,6 +105,9 @@ class RoadNet:
             e for r in net.getRoundabouts() for e in r.getEdges()
         )
         self.has_sidewalks = False
+        self._arms: dict[str, set[str]] = {}
+        #: nodes with pedestrian crossings
+        self.crossing_nodes: frozenset[str] = frozenset()
         self._load(net)
         self._build_segments()
 
@@ -105,7 +115,10 @@ class RoadNet:
     def _load(self, net) -> None:
         for node in net.getNodes():
             self.node_type[node.getID()] = node.getType()
+        crossings = set()
         for edge in net.getEdges(withInternal=True):
+            if edge.getFunction() == "crossing":
+                crossings.add(edge.getFromNode().getID())
             for lane in edge.getLanes():
                 if lane.allows(EGO_VCLASS):
                     self.lane_shape[lane.getID()] = np.asarray(lane.getShape(), dtype=float)[:, :2]
@@ -120,9 +133,13 @@ class RoadNet:
             if not car:
                 continue
             self.passenger_lanes[eid] = car
+            a, b = edge.getFromNode().getID(), edge.getToNode().getID()
+            self._arms.setdefault(a, set()).add(b)
+            self._arms.setdefault(b, set()).add(a)
             self.edge_length[eid] = float(edge.getLength())
             self.edge_speed[eid] = float(edge.getSpeed())
             self.edge_to_node[eid] = edge.getToNode().getID()
+        self.crossing_nodes = frozenset(crossings)
         for eid in sorted(self.passenger_lanes):
             edge = net.getEdge(eid)
             conns: dict[str, list[Connection]] = {}
@@ -135,13 +152,20 @@ class RoadNet:
                     if not (fl.allows(EGO_VCLASS) and tl.allows(EGO_VCLASS)):
                         continue
                     via = c.getViaLaneID() or ""
-                    via_len = self.lane_length.get(via, 0.0)
+                    chain = []
+                    lane_id = via
+                    while lane_id and lane_id not in chain and len(chain) < 8:
+                        chain.append(lane_id)
+                        outs = net.getLane(lane_id).getOutgoing()
+                        lane_id = (outs[0].getViaLaneID() or "") if outs else ""
+                    via_len = sum(self.lane_length.get(v, 0.0) for v in chain)
                     conns.setdefault(tid, []).append(
                         Connection(eid, tid, fl.getIndex(), tl.getIndex(), via, via_len,
-                                   c.getDirection())
+                                   c.getDirection(), c.getState() or "", c.getTLSID() or "",
+                                   int(c.getTLLinkIndex()), tuple(chain))
                     )
-                    if via:
-                        self.via_edges[via] = (eid, tid)
+                    for v in chain:
+                        self.via_edges.setdefault(v, (eid, tid))
             for tid, clist in conns.items():
                 self.connections[(eid, tid)] = tuple(
                     sorted(clist, key=lambda c: (c.from_lane, c.to_lane))
@@ -167,6 +191,10 @@ class RoadNet:
         self._seg_start = np.concatenate(start)
 
     # ----------------------------------------------------------------- geometry
+    def node_arms(self, node: str) -> int:
+        """Number of distinct neighbouring nodes joined to ``node`` by car edges (roads met)."""
+        return len(self._arms.get(node, ()) - {node})
+
     @property
     def lane_km(self) -> float:
         """Total length of passenger-car lanes on normal edges (km)."""

@@ -212,8 +212,8 @@ def build_route(net: RoadNet, edges: list[str], start: _Cand, end: _Cand) -> Ego
             roundabout=edge in net.roundabout_edges or nxt in net.roundabout_edges,
             pos=round(length, 2),
         ))
-        if conn.via:
-            add(net.lane_shape[conn.via])
+        for via in conn.via_chain:
+            add(net.lane_shape[via])
         cur = conn.to_lane
     poly = np.vstack(pieces) if pieces else np.zeros((0, 2))
     sx, sy, sh = net.lane_pose(start.lane, start.pos)

@@ -21,6 +21,11 @@ def _libsumo():
     return libsumo
 
 
+def sumo_constants():
+    """libsumo's constants module (variable ids for subscriptions)."""
+    return _libsumo().constants
+
+
 class SumoSession:
     """One SUMO run of a scenario: ``with SumoSession(sc) as s: s.step()``.
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import Enum
 
 
 @dataclass(frozen=True)
@@ -110,3 +111,195 @@ class EgoRoute:
     length: float
     junctions: tuple[JunctionPass, ...]
     lane_changes: tuple[LaneChange, ...]
+
+
+class Intent(str, Enum):
+    """What an instruction asks the driver to do next."""
+
+    LEFT = "left"
+    RIGHT = "right"
+    STRAIGHT = "straight"
+    FOLLOW = "follow"
+    LANE_LEFT = "lane_left"
+    LANE_RIGHT = "lane_right"
+    STOP = "stop"
+    UNKNOWN = "unknown"
+
+
+@dataclass(frozen=True)
+class Maneuver:
+    """One thing the route asks of the driver, at route position ``pos`` (m).
+
+    ``kind``: turn_left, turn_right, straight, u_turn, roundabout, highway_enter, highway_exit,
+    lane_change_left, lane_change_right or follow. ``junction``: the junction kind
+    (traffic_light, stop_sign, t_junction, crossroad, roundabout, highway_entry, highway_exit,
+    junction) or "" for lane changes and follow stretches. ``exit`` is the roundabout exit
+    number (1 = first), ``length`` the extent (m) of a follow stretch.
+    """
+
+    kind: str
+    pos: float
+    intent: Intent
+    junction: str = ""
+    junction_id: str = ""
+    exit: int = 0
+    length: float = 0.0
+
+
+@dataclass(frozen=True)
+class Instruction:
+    """One navigation instruction of a sequence.
+
+    ``trigger``: route position (m) from which it is active; ``text`` may hold the placeholder
+    ``[x]``, filled with ``distance`` (m) when shown to the agent; ``intent``: the intent of
+    the baseline maneuver it stands for; ``type``: the LangAuto-style instruction type.
+    Variants also record the ``template`` (bank entry or noise-operation id) and the baseline
+    ``source`` text they were made from.
+    """
+
+    id: int
+    trigger: float
+    text: str
+    intent: Intent
+    type: str
+    distance: float | None = None
+    maneuver_pos: float | None = None
+    junction: str = ""
+    template: str = ""
+    source: str = ""
+
+    def rendered(self) -> str:
+        """The text as the agent sees it: ``[x]`` replaced by the distance in metres."""
+        if self.distance is None:
+            return self.text
+        return self.text.replace("[x]", f"{self.distance:.0f}")
+
+
+@dataclass(frozen=True)
+class Notice:
+    """A notice shown beside the instruction between route positions ``trigger`` and ``end``
+    (m): a traffic light, a stop sign, pedestrians crossing ahead."""
+
+    id: int
+    trigger: float
+    end: float
+    text: str
+    type: str
+    intent: Intent = Intent.UNKNOWN
+
+
+@dataclass(frozen=True)
+class InstructionSet:
+    """A full instruction sequence for one route: the baseline (``family='baseline'``, k=0)
+    or counterfactual variant ``k`` of a family, with the baseline's ids and triggers."""
+
+    route_id: str
+    family: str
+    k: int
+    seed: int
+    instructions: tuple[Instruction, ...]
+    notices: tuple[Notice, ...] = ()
+
+
+class TerminationClass(str, Enum):
+    """ICR-Drive's failure classes: done, route deviation (RD) or timeout-like (TO)."""
+
+    DONE = "done"
+    RD = "RD"
+    TO = "TO"
+
+
+#: termination kind -> class. completed: the route's end was reached; route_deviation: more
+#: than 30 m from the route; agent_blocked: under 0.1 m/s for 180 s; route_timeout: 0.8 s per
+#: metre + 5 s elapsed; stuck: SUMO teleported the ego; sim_error: the simulator failed.
+TERMINATIONS: dict[str, TerminationClass] = {
+    "completed": TerminationClass.DONE,
+    "route_deviation": TerminationClass.RD,
+    "agent_blocked": TerminationClass.TO,
+    "route_timeout": TerminationClass.TO,
+    "stuck": TerminationClass.TO,
+    "sim_error": TerminationClass.TO,
+}
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something that happened at simulation time ``t`` (s) and route position ``pos`` (m).
+
+    ``kind``: collision_vehicle, collision_pedestrian, collision_static, red_light, stop_sign,
+    wrong_way, lane_invasion, teleport_background (a background vehicle teleported: a jam),
+    ego_teleport (SUMO removed the ego: stuck), sim_error.
+    ``other``: the other actor or the junction / lane id; ``x``, ``y`` in m.
+    """
+
+    kind: str
+    t: float
+    pos: float
+    other: str = ""
+    x: float = 0.0
+    y: float = 0.0
+
+
+@dataclass(frozen=True)
+class EpisodeLog:
+    """Everything scoring needs from one closed-loop episode, serialisable to JSON.
+
+    Per-step columns (equal length N, one entry per simulation step after the ego entered):
+    ``t`` (s), ``x``/``y`` (m, ego centre), ``yaw`` (rad), ``speed`` (m/s), ``progress`` (m
+    along the route, monotone: the furthest point reached), ``instruction`` (active
+    instruction id, -1 none), ``outside`` (1 when the ego's footprint is outside the route's
+    lanes this step: off the route's lanes, off-road or wrong way, else 0), ``route_dist`` (m,
+    distance from the ego centre to the route polyline). ``route_length`` in m.
+    ``termination`` is a key of :data:`TERMINATIONS`; ``t`` strictly increases, ``progress``
+    never decreases, and the route timeout runs from ``t[0]``.
+    """
+
+    route_id: str
+    agent: str
+    family: str
+    k: int
+    seed: int
+    step_length: float
+    route_length: float
+    t: tuple[float, ...]
+    x: tuple[float, ...]
+    y: tuple[float, ...]
+    yaw: tuple[float, ...]
+    speed: tuple[float, ...]
+    progress: tuple[float, ...]
+    instruction: tuple[int, ...]
+    outside: tuple[int, ...]
+    route_dist: tuple[float, ...]
+    events: tuple[Event, ...]
+    termination: str
+    termination_t: float
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class Infraction:
+    """A penalised infraction: its kind, the IS factor it applies (e.g. 0.6), when and where."""
+
+    kind: str
+    factor: float
+    t: float
+    pos: float
+    other: str = ""
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """Leaderboard 1.0 scores of one episode: RC and DS in 0-100, IS in 0-1."""
+
+    route_id: str
+    agent: str
+    family: str
+    k: int
+    rc: float
+    is_: float
+    ds: float
+    termination: str
+    termination_class: TerminationClass
+    infractions: tuple[Infraction, ...]
+    outside_lanes_pct: float
+    duration: float

@@ -26,3 +26,31 @@ def carla_mini_out(tmp_path_factory) -> Path:
     )
     assert report.failures == []
     return out
+
+
+@pytest.fixture(scope="session")
+def converted(tmp_path_factory) -> dict[str, Path]:
+    """Every bundled evaluation split converted once per session (2 workers)."""
+    from icrsumo.convert import ConvertOptions, convert_routes
+    from icrsumo.resources import bundled_suites
+
+    out = {}
+    for split in ("tiny", "short", "long"):
+        d = tmp_path_factory.mktemp(split)
+        rep = convert_routes(bundled_suites()[split], d, ConvertOptions(workers=2))
+        assert rep.failures == []
+        out[split] = d
+    return out
+
+
+@pytest.fixture(scope="session")
+def generated(converted, tmp_path_factory) -> dict[str, Path]:
+    from icrsumo.instructions.generate import GenerateOptions, generate
+
+    out = {}
+    for split, d in converted.items():
+        o = tmp_path_factory.mktemp(f"instr_{split}")
+        written, failures = generate(d, o, GenerateOptions(workers=2))
+        assert failures == []
+        out[split] = o
+    return out

@@ -22,18 +22,6 @@ ROOT = Path(__file__).resolve().parent.parent
 EVAL_SPLITS = ("tiny", "short", "long")
 
 
-@pytest.fixture(scope="module")
-def converted(tmp_path_factory) -> dict[str, Path]:
-    """Every evaluation split converted once (2 workers)."""
-    out = {}
-    for split in EVAL_SPLITS:
-        d = tmp_path_factory.mktemp(split)
-        rep = convert_routes(bundled_suites()[split], d, ConvertOptions(workers=2))
-        assert rep.failures == []
-        out[split] = d
-    return out
-
-
 def _node_types(net) -> Counter:
     return Counter(n.getType() for n in net.sumolib_net.getNodes())
 

@@ -1,0 +1,1 @@
+"""Agents: the protocol, built-in privileged agents and the registry."""

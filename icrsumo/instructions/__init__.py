@@ -1,0 +1,1 @@
+"""Language side: maneuvers, baseline instructions, intent classifier, counterfactual families."""

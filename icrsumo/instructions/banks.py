@@ -1,0 +1,291 @@
+"""Template banks as data (``templates/*.json``): loading and up-front validation.
+
+Files of a template folder:
+
+- ``baseline.json``: LangAuto-style phrasings per instruction type (our own baseline bank);
+- ``paraphrase.json`` (P[τ]) and ``misleading.json`` (M[τ]): per intent τ, ``plain`` entries and
+  ``distance`` entries (with ``[x]``); left/right/straight entries may use ``{junction}``;
+- ``ambiguity.json`` (A): one global list, no placeholders;
+- ``noise.json`` (N): operations, each a list of primitives of :mod:`.noise`.
+
+Every problem is an InputError naming the file and the entry.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..errors import InputError
+from ..resources import data_dir
+from ..types import Intent
+from .intent import classify_intent
+from .noise import PRIMITIVES
+
+#: the smallest bank size per intent and form, so that K = 8 draws without replacement vary
+MIN_ENTRIES = 12
+#: intents that navigation instructions carry (the ones P and M banks must cover)
+NAV_INTENTS = (Intent.LEFT, Intent.RIGHT, Intent.STRAIGHT, Intent.FOLLOW, Intent.LANE_LEFT,
+               Intent.LANE_RIGHT)
+#: what a misleading entry for intent τ must classify as
+CONTRADICTS: dict[Intent, frozenset[Intent]] = {
+    Intent.LEFT: frozenset({Intent.RIGHT}),
+    Intent.RIGHT: frozenset({Intent.LEFT}),
+    Intent.STRAIGHT: frozenset({Intent.LEFT, Intent.RIGHT}),
+    Intent.FOLLOW: frozenset({Intent.LEFT, Intent.RIGHT}),
+    Intent.LANE_LEFT: frozenset({Intent.LANE_RIGHT}),
+    Intent.LANE_RIGHT: frozenset({Intent.LANE_LEFT}),
+}
+#: intents whose P/M entries may name the junction
+JUNCTION_INTENTS = frozenset({Intent.LEFT, Intent.RIGHT, Intent.STRAIGHT})
+#: the noun phrase that fills {junction}, by maneuver junction kind
+JUNCTION_PHRASES = {
+    "traffic_light": "the traffic light", "stop_sign": "the stop sign",
+    "t_junction": "the T-junction", "crossroad": "the intersection",
+    "roundabout": "the roundabout", "highway_exit": "the exit", "highway_entry": "the ramp",
+    "junction": "the next junction", "": "the next junction",
+}
+#: instruction types of the baseline bank the generator needs, with their intent rule
+BASELINE_TYPES: dict[str, str] = {
+    "start": "follow", "follow": "follow", "follow_distance": "follow",
+    "follow_highway": "follow", "follow_highway_distance": "follow",
+    "turn": "{dir}", "turn_distance": "{dir}", "turn_intersection": "{dir}",
+    "turn_traffic_light": "{dir}", "turn_t_junction": "{dir}", "turn_stop_sign": "{dir}",
+    "straight": "straight", "straight_distance": "straight", "straight_intersection": "straight",
+    "straight_traffic_light": "straight", "straight_stop_sign": "straight",
+    "roundabout_exit": "{exit}", "lane_change": "lane_{side}", "lane_change_distance": "lane_{side}",
+    "highway_enter": "follow", "highway_exit": "right", "highway_exit_distance": "right",
+    "notice_traffic_light": "stop", "notice_stop_sign": "stop", "notice_pedestrians": "stop",
+}
+MIN_BASELINE = 6
+_SLOT = re.compile(r"\{(\w+)\}")
+ORDINALS = ("first", "second", "third", "fourth")
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One bank entry: its id and template text."""
+
+    id: str
+    text: str
+
+
+@dataclass(frozen=True)
+class Banks:
+    """All template banks of one folder. ``sha256`` hashes the files' bytes."""
+
+    folder: Path
+    baseline: dict[str, tuple[str, ...]]
+    paraphrase: dict[Intent, dict[str, tuple[Entry, ...]]]
+    misleading: dict[Intent, dict[str, tuple[Entry, ...]]]
+    ambiguity: tuple[Entry, ...]
+    noise: tuple[tuple[str, tuple[str, ...]], ...]
+    sha256: str
+
+
+def fill(text: str, junction: str = "", **slots: str) -> str:
+    """Fill ``{junction}`` (from a junction kind) and other ``{slot}``s; ``[x]`` stays."""
+    values = {"junction": JUNCTION_PHRASES.get(junction, "the next junction"), **slots}
+    return _SLOT.sub(lambda m: values.get(m.group(1), m.group(0)), text)
+
+
+def _load(path: Path, family: str | None) -> dict:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(path, "", "template bank missing", "add the file or drop --templates") from None
+    except json.JSONDecodeError as err:
+        raise InputError(path, f"line {err.lineno}, column {err.colno}", f"malformed JSON ({err.msg})",
+                         "fix the JSON syntax") from None
+    if not isinstance(data, dict):
+        raise InputError(path, "top level", "must be a JSON object", "see the README's bank format")
+    if family is not None and data.get("family") != family:
+        raise InputError(path, "family", f"expected \"family\": \"{family}\"", "fix the family field")
+    return data
+
+
+def _check_text(path: Path, place: str, text: object) -> str:
+    if not isinstance(text, str) or not text.strip():
+        raise InputError(path, place, "text must be a non-empty string", "write the sentence")
+    if len(text) > 300:
+        raise InputError(path, place, "text longer than 300 characters", "shorten it")
+    return text
+
+
+def _load_baseline(folder: Path) -> dict[str, tuple[str, ...]]:
+    path = folder / "baseline.json"
+    data = _load(path, None)
+    types = data.get("types")
+    if not isinstance(types, dict):
+        raise InputError(path, "types", "missing object 'types'", "see the README's bank format")
+    out = {}
+    for tname, rule in BASELINE_TYPES.items():
+        spec = types.get(tname)
+        if not isinstance(spec, dict) or not isinstance(spec.get("phrasings"), list):
+            raise InputError(path, f"types.{tname}", "missing type or its 'phrasings' list",
+                             f"add \"{tname}\": {{\"intent\": \"{rule}\", \"phrasings\": [...]}}")
+        phr = spec["phrasings"]
+        if len(phr) < MIN_BASELINE:
+            raise InputError(path, f"types.{tname}", f"has {len(phr)} phrasings, needs {MIN_BASELINE}",
+                             "add phrasings")
+        for i, text in enumerate(phr):
+            place = f"types.{tname}.phrasings[{i}]"
+            _check_text(path, place, text)
+            has_x = "[x]" in text
+            if has_x != tname.endswith("_distance"):
+                raise InputError(path, place, f"{'has' if has_x else 'lacks'} the placeholder [x]",
+                                 "only *_distance types carry [x], and all of their phrasings do")
+            need = set(_SLOT.findall(rule))
+            slots = set(_SLOT.findall(text))
+            if slots != need:
+                raise InputError(path, place, f"placeholders {sorted(slots)} but type needs {sorted(need)}",
+                                 "use exactly the type's placeholders")
+            if tname.startswith("notice_"):
+                continue
+            for fills in _fills(need):
+                want = _exit_intent(fills["exit"]) if "exit" in fills else Intent(rule.format(**fills))
+                got = classify_intent(fill(text, **fills))
+                if got != want:
+                    raise InputError(path, place, f"{fill(text, **fills)!r} classifies as {got.value}, "
+                                     f"not {want.value}", "rephrase it so that the intent is clear")
+        out[tname] = tuple(phr)
+    return out
+
+
+def _exit_intent(ordinal: str) -> Intent:
+    from .maneuvers import roundabout_intent
+
+    return roundabout_intent(ORDINALS.index(ordinal) + 1)
+
+
+def _fills(slots: set[str]) -> list[dict[str, str]]:
+    if "dir" in slots:
+        return [{"dir": "left"}, {"dir": "right"}]
+    if "side" in slots:
+        return [{"side": "left"}, {"side": "right"}]
+    if "exit" in slots:
+        return [{"exit": o} for o in ORDINALS]
+    return [{}]
+
+
+def _load_intent_bank(folder: Path, family: str) -> dict[Intent, dict[str, tuple[Entry, ...]]]:
+    path = folder / f"{family}.json"
+    data = _load(path, family)
+    intents = data.get("intents")
+    if not isinstance(intents, dict):
+        raise InputError(path, "intents", "missing object 'intents'", "see the README's bank format")
+    out: dict[Intent, dict[str, tuple[Entry, ...]]] = {}
+    seen: set[str] = set()
+    for tau in NAV_INTENTS:
+        spec = intents.get(tau.value)
+        if not isinstance(spec, dict):
+            raise InputError(path, f"intents.{tau.value}", "missing intent", "add plain and distance lists")
+        out[tau] = {}
+        for form in ("plain", "distance"):
+            entries = spec.get(form)
+            place0 = f"intents.{tau.value}.{form}"
+            if not isinstance(entries, list) or len(entries) < MIN_ENTRIES:
+                n = len(entries) if isinstance(entries, list) else 0
+                raise InputError(path, place0, f"has {n} entries, needs at least {MIN_ENTRIES}",
+                                 "add entries so that K draws without replacement vary")
+            parsed = []
+            for i, e in enumerate(entries):
+                place = f"{place0}[{i}]"
+                if not isinstance(e, dict) or not isinstance(e.get("id"), str):
+                    raise InputError(path, place, "entry must be {\"id\": str, \"text\": str}", "fix it")
+                text = _check_text(path, place, e.get("text"))
+                if e["id"] in seen:
+                    raise InputError(path, place, f"duplicate id {e['id']!r}", "give every entry its own id")
+                seen.add(e["id"])
+                if text.count("[x]") != (1 if form == "distance" else 0):
+                    raise InputError(path, place, f"{form} entries need [x] "
+                                     f"{'exactly once' if form == 'distance' else 'zero times'}",
+                                     "keep the distance placeholder as the form requires")
+                slots = set(_SLOT.findall(text))
+                allowed = {"junction"} if tau in JUNCTION_INTENTS else set()
+                if slots - allowed:
+                    raise InputError(path, place,
+                                     f"unknown or disallowed placeholders {sorted(slots - allowed)}",
+                                     "only left/right/straight entries may use {junction}")
+                got = classify_intent(fill(text, "crossroad"))
+                want = {tau} if family == "paraphrase" else CONTRADICTS[tau]
+                if got not in want:
+                    expected = " or ".join(sorted(w.value for w in want))
+                    raise InputError(path, place, f"{text!r} classifies as {got.value}, not {expected}",
+                                     "rephrase it so that the classifier recovers the intended direction")
+                parsed.append(Entry(e["id"], text))
+            out[tau][form] = tuple(parsed)
+    return out
+
+
+def _load_ambiguity(folder: Path) -> tuple[Entry, ...]:
+    path = folder / "ambiguity.json"
+    data = _load(path, "ambiguity")
+    entries = data.get("entries")
+    if not isinstance(entries, list) or len(entries) < MIN_ENTRIES:
+        raise InputError(path, "entries", f"needs at least {MIN_ENTRIES} entries", "add entries")
+    out, seen = [], set()
+    for i, e in enumerate(entries):
+        place = f"entries[{i}]"
+        if not isinstance(e, dict) or not isinstance(e.get("id"), str):
+            raise InputError(path, place, "entry must be {\"id\": str, \"text\": str}", "fix it")
+        text = _check_text(path, place, e.get("text"))
+        if e["id"] in seen:
+            raise InputError(path, place, f"duplicate id {e['id']!r}", "give every entry its own id")
+        seen.add(e["id"])
+        if "[x]" in text or _SLOT.search(text):
+            raise InputError(path, place, "ambiguity entries carry no placeholders", "remove them")
+        got = classify_intent(text)
+        if got != Intent.UNKNOWN:
+            raise InputError(path, place, f"{text!r} still carries a direction ({got.value})",
+                             "remove direction words so that no maneuver can be recovered")
+        out.append(Entry(e["id"], text))
+    return tuple(out)
+
+
+def _load_noise(folder: Path) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    path = folder / "noise.json"
+    data = _load(path, "noise")
+    ops = data.get("operations")
+    if not isinstance(ops, list) or len(ops) < MIN_ENTRIES:
+        raise InputError(path, "operations", f"needs at least {MIN_ENTRIES} operations", "add operations")
+    out, seen = [], set()
+    for i, op in enumerate(ops):
+        place = f"operations[{i}]"
+        well_formed = isinstance(op, dict) and isinstance(op.get("id"), str) \
+            and isinstance(op.get("ops"), list) and bool(op["ops"])
+        if not well_formed:
+            raise InputError(path, place, 'operation must be {"id": str, "ops": [primitive, ...]}',
+                             "fix it")
+        bad = [p for p in op["ops"] if p not in PRIMITIVES]
+        if bad:
+            raise InputError(path, place, f"unknown primitive(s) {bad}",
+                             f"use {', '.join(PRIMITIVES)}")
+        if op["id"] in seen:
+            raise InputError(path, place, f"duplicate id {op['id']!r}", "give every operation its own id")
+        seen.add(op["id"])
+        out.append((op["id"], tuple(op["ops"])))
+    return tuple(out)
+
+
+def load_banks(folder: Path | None = None) -> Banks:
+    """Load and validate every bank in ``folder`` (default: the bundled ``templates/``)."""
+    folder = Path(folder) if folder is not None else data_dir("templates")
+    if not folder.is_dir():
+        raise InputError(folder, "", "template folder not found", "check the --templates path")
+    h = hashlib.sha256()
+    for name in ("baseline", "paraphrase", "misleading", "ambiguity", "noise"):
+        p = folder / f"{name}.json"
+        h.update(name.encode() + (p.read_bytes() if p.is_file() else b""))
+    return Banks(
+        folder=folder,
+        baseline=_load_baseline(folder),
+        paraphrase=_load_intent_bank(folder, "paraphrase"),
+        misleading=_load_intent_bank(folder, "misleading"),
+        ambiguity=_load_ambiguity(folder),
+        noise=_load_noise(folder),
+        sha256=h.hexdigest(),
+    )

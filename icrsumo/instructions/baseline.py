@@ -1,0 +1,157 @@
+"""Baseline LangAuto-style instruction sequences from a route's maneuvers.
+
+Layout along the route (positions in m):
+
+- a ``start`` instruction at 0 (dropped when the first maneuver is announced right away);
+- per junction maneuver, when there is room (35 m free before it), a far announcement with a
+  distance (``turn_distance``, ``straight_distance``, ``highway_exit_distance``) 80 m before
+  (150 m for highway exits) and a near one qualified by the junction kind
+  (``turn_traffic_light``, ``turn_t_junction``, ``roundabout_exit``, ...) 20 m before;
+  otherwise one instruction 50 m before (or as soon as the previous maneuver is done);
+- lane changes at the start of the edge where the route needs them, with the distance left to
+  the junction where the lane matters when that is 30 m or more;
+- follow instructions over gaps of 30 m or more between maneuvers and after the last one;
+- notices beside the instructions: traffic lights and stop signs 40 m before the junction,
+  pedestrians at signalised or stop-controlled junctions with crossings.
+
+Phrasings are drawn from the baseline bank with a Generator seeded by the route seed; distances
+are rounded to 10 m.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..types import Instruction, InstructionSet, Intent, Maneuver, Notice
+from .banks import ORDINALS, Banks, fill
+
+FAR_M, NEAR_M, SINGLE_M = 80.0, 20.0, 50.0
+TWO_STAGE_ROOM_M = 35.0
+FOLLOW_GAP_M = 30.0
+AFTER_M = 10.0
+NOTICE_M = 40.0
+HIGHWAY_EXIT_FAR_M = 150.0
+
+_JUNCTION_TYPE = {"traffic_light": "traffic_light", "t_junction": "t_junction",
+                  "crossroad": "intersection", "stop_sign": "stop_sign"}
+
+
+def _round10(d: float) -> float:
+    return float(max(10, int(round(d / 10.0)) * 10))
+
+
+class _Builder:
+    def __init__(self, banks: Banks, rng: np.random.Generator) -> None:
+        self.banks, self.rng = banks, rng
+        self.items: list[Instruction] = []
+
+    def add(self, itype: str, trigger: float, intent: Intent, m: Maneuver | None = None,
+            distance: float | None = None, **slots: str) -> None:
+        phrasings = self.banks.baseline[itype]
+        text = fill(phrasings[int(self.rng.integers(len(phrasings)))], **slots)
+        # the first instruction is active from the start; later ones strictly after each other
+        trigger = max(trigger, self.items[-1].trigger + 1.0) if self.items else 0.0
+        self.items.append(Instruction(
+            id=len(self.items), trigger=round(trigger, 2), text=text, intent=intent, type=itype,
+            distance=_round10(distance) if distance is not None else None,
+            maneuver_pos=None if m is None else round(m.pos, 2),
+            junction="" if m is None else m.junction,
+        ))
+
+
+def _near_type(m: Maneuver) -> tuple[str, dict[str, str]]:
+    """Junction-qualified instruction type and slots for a maneuver."""
+    if m.kind == "roundabout":
+        return "roundabout_exit", {"exit": ORDINALS[min(m.exit, len(ORDINALS)) - 1]}
+    if m.kind == "highway_exit":
+        return "highway_exit", {}
+    if m.kind == "highway_enter":
+        return "highway_enter", {}
+    qual = _JUNCTION_TYPE.get(m.junction)
+    if m.kind == "straight":
+        return ("straight_" + qual if qual in ("intersection", "traffic_light", "stop_sign")
+                else "straight"), {}
+    direction = "left" if m.intent == Intent.LEFT else "right"
+    return (f"turn_{qual}" if qual else "turn"), {"dir": direction}
+
+
+def _far_type(m: Maneuver) -> tuple[str, dict[str, str]] | None:
+    if m.kind in ("turn_left", "turn_right"):
+        return "turn_distance", {"dir": "left" if m.intent == Intent.LEFT else "right"}
+    if m.kind == "straight":
+        return "straight_distance", {}
+    if m.kind == "highway_exit":
+        return "highway_exit_distance", {}
+    return None
+
+
+def build_baseline(
+    route_id: str, length: float, maneuvers: list[Maneuver], banks: Banks, seed: int,
+    highway_spans: tuple[tuple[float, float], ...] = (),
+    crossing_junctions: frozenset[str] = frozenset(),
+) -> InstructionSet:
+    """The baseline sequence of one route (``length`` in m) from its sorted maneuvers.
+
+    ``highway_spans``: (start, end) route positions (m) driven on a highway (for the
+    follow_highway types); ``crossing_junctions``: junction ids with pedestrian crossings.
+    """
+    rng = np.random.default_rng(seed)
+    b = _Builder(banks, rng)
+    turns = [m for m in maneuvers if not m.kind.startswith("lane_change")]
+    cursor = 0.0
+    first_announce = min((max(0.0, m.pos - SINGLE_M) for m in maneuvers), default=length)
+    if first_announce > 15.0:
+        b.add("start", 0.0, Intent.FOLLOW)
+    def follow(at: float, until: float) -> None:
+        mid = (at + until) / 2
+        on_hw = any(a <= mid < b for a, b in highway_spans)
+        base = "follow_highway" if on_hw else "follow"
+        if rng.random() < 0.5:
+            b.add(base + "_distance", at, Intent.FOLLOW, distance=until - at)
+        else:
+            b.add(base, at, Intent.FOLLOW)
+
+    for m in maneuvers:
+        if m.kind.startswith("lane_change"):
+            side = "left" if m.intent == Intent.LANE_LEFT else "right"
+            deadline = next((t.pos for t in turns if t.pos > m.pos), length)
+            room = deadline - max(cursor, m.pos)
+            if room >= 30.0 and rng.random() < 0.5:
+                b.add("lane_change_distance", max(cursor, m.pos), m.intent, m, distance=room, side=side)
+            else:
+                b.add("lane_change", max(cursor, m.pos), m.intent, m, side=side)
+            # leave the lane change on screen for a while before the next announcement
+            cursor = max(cursor, m.pos) + min(30.0, max(1.0, 0.5 * room))
+            continue
+        far_m = HIGHWAY_EXIT_FAR_M if m.kind == "highway_exit" else FAR_M
+        far = _far_type(m)
+        announce = max(cursor, m.pos - (far_m if far else SINGLE_M))
+        if announce - cursor >= FOLLOW_GAP_M:
+            follow(cursor, announce)
+        if far is not None and m.pos - announce >= TWO_STAGE_ROOM_M:
+            itype, slots = far
+            b.add(itype, announce, m.intent, m, distance=m.pos - announce, **slots)
+            itype, slots = _near_type(m)
+            b.add(itype, m.pos - NEAR_M, m.intent, m, **slots)
+        else:
+            itype, slots = _near_type(m)
+            b.add(itype, announce, m.intent, m, **slots)
+        cursor = m.pos + AFTER_M
+    if length - cursor >= FOLLOW_GAP_M or not b.items:
+        follow(min(cursor, length), length)
+
+    notices: list[Notice] = []
+    for m in turns:
+        for ntype, ok in (("notice_traffic_light", m.junction == "traffic_light"),
+                          ("notice_stop_sign", m.junction == "stop_sign"),
+                          ("notice_pedestrians", m.junction_id in crossing_junctions
+                           and m.junction in ("traffic_light", "stop_sign") and rng.random() < 0.5)):
+            if ok:
+                phr = banks.baseline[ntype]
+                notices.append(Notice(
+                    id=len(notices), trigger=round(max(0.0, m.pos - NOTICE_M), 2),
+                    end=round(m.pos + AFTER_M, 2), text=phr[int(rng.integers(len(phr)))],
+                    type=ntype, intent=Intent.STOP,
+                ))
+    return InstructionSet(route_id=route_id, family="baseline", k=0, seed=seed,
+                          instructions=tuple(b.items), notices=tuple(notices))

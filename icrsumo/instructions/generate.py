@@ -1,0 +1,146 @@
+"""``icrsumo generate``: baseline sequence + K variants per family for every converted route.
+
+Randomness: phrasings of the baseline come from a Generator seeded with the route's seed (from
+the scenario); every counterfactual draw of a route comes from one Generator seeded with
+``(--seed, crc32(route id))``. So a route's variants do not depend on which other routes are
+generated with it, nor on the worker count.
+"""
+
+from __future__ import annotations
+
+import zlib
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+from ..convert import safe_name
+from ..errors import InputError
+from ..fsio import dumps_json, write_atomic
+from ..networks import load_net
+from ..scenario import Scenario, find_scenarios, read_scenario
+from .banks import Banks, load_banks
+from .baseline import build_baseline
+from .families import FAMILIES, make_variants
+from .maneuvers import extract_maneuvers, is_highway
+from .store import FORMAT, route_document
+
+DEFAULT_SEED = 2026
+DEFAULT_K = 8
+
+
+@dataclass(frozen=True)
+class GenerateOptions:
+    """What to generate. ``llm``: an LLMConfig to use an LLM instead of the template banks."""
+
+    families: tuple[str, ...] = FAMILIES
+    k: int = DEFAULT_K
+    seed: int = DEFAULT_SEED
+    templates: Path | None = None
+    workers: int = 1
+    llm: object | None = None
+
+    def check(self) -> None:
+        bad = [f for f in self.families if f not in FAMILIES]
+        if bad or not self.families:
+            raise InputError("--families", "", f"unknown family {bad[0] if bad else '(none)'}",
+                             f"use some of {', '.join(FAMILIES)}")
+        if not 1 <= self.k <= 64:
+            raise InputError("--k", "", f"K={self.k} out of range", "use 1 to 64 (default 8)")
+        if self.workers < 1:
+            raise InputError("--workers", "", "must be at least 1", "give a positive count")
+
+
+@cache
+def _banks(folder: str | None) -> Banks:
+    return load_banks(Path(folder) if folder else None)
+
+
+def route_rng(seed: int, route_id: str) -> np.random.Generator:
+    """The Generator that drives every counterfactual draw of one route."""
+    return np.random.default_rng([seed, zlib.crc32(route_id.encode("utf-8"))])
+
+
+def _highway_spans(sc: Scenario, net) -> tuple[tuple[float, float], ...]:
+    """(start, end) route positions (m) of the route's highway edges."""
+    cuts = [0.0] + [float(j["pos"]) for j in sc.manifest["junctions"]] + [sc.length]
+    return tuple((cuts[i], cuts[i + 1]) for i, e in enumerate(sc.ego_edges)
+                 if i + 1 < len(cuts) and is_highway(net, e))
+
+
+def generate_route(scenario_dir: Path, opts: GenerateOptions) -> tuple[str, dict]:
+    """The instruction document of one converted route."""
+    sc = read_scenario(scenario_dir)
+    net = load_net(sc.net)
+    banks = _banks(str(opts.templates) if opts.templates else None)
+    maneuvers = extract_maneuvers(sc, net)
+    baseline = build_baseline(sc.route_id, sc.length, maneuvers, banks, sc.seed,
+                              _highway_spans(sc, net), net.crossing_nodes)
+    if opts.llm is None:
+        variants = make_variants(baseline, opts.families, opts.k, banks, opts.seed,
+                                 route_rng(opts.seed, sc.route_id))
+        generator = "templates"
+    else:
+        from .llm import llm_variants
+
+        variants = [v for fam in opts.families
+                    for v in llm_variants(baseline, fam, opts.k, opts.seed, opts.llm)]
+        generator = f"llm:{opts.llm.model}"
+    meta = {"seed": opts.seed, "k": opts.k, "families": list(opts.families),
+            "generator": generator, "banks_sha256": banks.sha256,
+            "scenario_hash": sc.manifest.get("source_hash", "")}
+    return sc.route_id, route_document(baseline, variants, maneuvers, meta)
+
+
+def _job(args: tuple[str, GenerateOptions]) -> tuple[str, str, str]:
+    d, opts = args
+    try:
+        rid, doc = generate_route(Path(d), opts)
+        return "ok", rid, dumps_json(doc)
+    except InputError as err:
+        return "failed", d, err.line()
+    except Exception as err:  # an LLM route that failed after its retries
+        from .llm import LLMError
+
+        if isinstance(err, LLMError):
+            return "failed", d, f"{d}: {err}"
+        raise
+
+
+def generate(scenarios: Path, out: Path, opts: GenerateOptions) -> tuple[list[str], list[str]]:
+    """Write ``OUT/<route>.json`` per route and ``OUT/index.json``; returns (route ids written,
+    failure lines). Template banks are validated before any route is touched."""
+    opts.check()
+    scenarios = Path(scenarios)
+    if (scenarios / "scenario.json").is_file():
+        dirs = [scenarios]
+    elif scenarios.is_dir():
+        dirs = find_scenarios(scenarios)
+    else:
+        dirs = []
+    if not dirs:
+        raise InputError(scenarios, "", "no converted scenarios found",
+                         "run icrsumo convert-routes ROUTES --out DIR first and pass DIR")
+    _banks(str(opts.templates) if opts.templates else None)  # validate up front
+    jobs = [(str(d), opts) for d in dirs]
+    if opts.workers > 1 and len(jobs) > 1:
+        with ProcessPoolExecutor(max_workers=min(opts.workers, len(jobs))) as pool:
+            results = list(pool.map(_job, jobs))
+    else:
+        results = [_job(j) for j in jobs]
+    written, failures, index = [], [], []
+    for status, rid, payload in results:
+        if status != "ok":
+            failures.append(payload)
+            continue
+        name = f"{safe_name(rid)}.json"
+        write_atomic(Path(out) / name, payload)
+        written.append(rid)
+        index.append({"route_id": rid, "file": name})
+    write_atomic(Path(out) / "index.json", dumps_json({
+        "format": FORMAT.replace("instructions", "instruction-index"), "seed": opts.seed,
+        "k": opts.k, "families": list(opts.families), "routes": index, "failures": failures,
+    }))
+    return written, failures

@@ -1,0 +1,89 @@
+"""Maneuvers from route geometry: what the route asks of the driver, and where (m along it).
+
+Input is a converted scenario (its junctions and lane changes, see ``scenario.json``) and its
+network. Junction kinds follow LangAuto's qualifiers: traffic_light, stop_sign, t_junction,
+crossroad, roundabout (with exit number), highway_entry / highway_exit.
+"""
+
+from __future__ import annotations
+
+from ..networks import RoadNet
+from ..scenario import Scenario
+from ..types import Intent, Maneuver
+
+#: an edge with a speed limit at or above this (m/s, 90 km/h) is highway
+HIGHWAY_SPEED = 25.0
+
+_TURN = {"s": ("straight", Intent.STRAIGHT), "l": ("turn_left", Intent.LEFT),
+         "L": ("turn_left", Intent.LEFT), "r": ("turn_right", Intent.RIGHT),
+         "R": ("turn_right", Intent.RIGHT), "t": ("u_turn", Intent.UNKNOWN)}
+
+
+def roundabout_intent(exit_number: int) -> Intent:
+    """LangAuto-style reading of a roundabout exit on a four-arm roundabout:
+    1st exit = right, 2nd = straight, 3rd or later = left."""
+    return {1: Intent.RIGHT, 2: Intent.STRAIGHT}.get(exit_number, Intent.LEFT)
+
+
+def junction_kind(net: RoadNet, node: str) -> str:
+    """traffic_light, stop_sign, t_junction, crossroad or junction for a SUMO node."""
+    ntype = net.node_type.get(node, "")
+    if ntype.startswith("traffic_light"):
+        return "traffic_light"
+    if ntype in ("priority_stop", "allway_stop"):
+        return "stop_sign"
+    arms = net.node_arms(node)
+    if arms == 3:
+        return "t_junction"
+    if arms >= 4:
+        return "crossroad"
+    return "junction"
+
+
+def is_highway(net: RoadNet, edge: str) -> bool:
+    return net.edge_speed.get(edge, 0.0) >= HIGHWAY_SPEED
+
+
+def extract_maneuvers(scenario: Scenario, net: RoadNet) -> list[Maneuver]:
+    """Junction maneuvers (where the route has a choice, or enters / leaves a highway) and the
+    lane changes it requires, sorted by route position. Follow stretches are the gaps between
+    them and are added by the instruction generator."""
+    junctions = scenario.manifest["junctions"]
+    out: list[Maneuver] = []
+    i = 0
+    while i < len(junctions):
+        j = junctions[i]
+        ring = net.roundabout_edges
+        if j["to_edge"] in ring and j["from_edge"] not in ring:
+            # entering a roundabout: count the exits passed up to the one taken
+            exit_no, k = 0, i + 1
+            while k < len(junctions) and junctions[k]["from_edge"] in ring:
+                jk = junctions[k]
+                if any(s not in ring for s in net.successors.get(jk["from_edge"], ())):
+                    exit_no += 1
+                if jk["to_edge"] not in ring:
+                    break
+                k += 1
+            exit_no = max(exit_no, 1)
+            out.append(Maneuver("roundabout", j["pos"], roundabout_intent(exit_no), "roundabout",
+                                j["junction"], exit=exit_no))
+            i = k + 1
+            continue
+        from_hw, to_hw = is_highway(net, j["from_edge"]), is_highway(net, j["to_edge"])
+        if to_hw and not from_hw:
+            out.append(Maneuver("highway_enter", j["pos"], Intent.FOLLOW, "highway_entry",
+                                j["junction"]))
+        elif from_hw and not to_hw and j["choice"]:
+            out.append(Maneuver("highway_exit", j["pos"], Intent.RIGHT, "highway_exit",
+                                j["junction"]))
+        elif j["choice"]:
+            kind, intent = _TURN.get(j["direction"], ("straight", Intent.STRAIGHT))
+            out.append(Maneuver(kind, j["pos"], intent, junction_kind(net, j["junction"]),
+                                j["junction"]))
+        i += 1
+    for c in scenario.manifest["lane_changes"]:
+        left = c["to_lane"] > c["from_lane"]
+        out.append(Maneuver("lane_change_left" if left else "lane_change_right", c["pos"],
+                            Intent.LANE_LEFT if left else Intent.LANE_RIGHT))
+    out.sort(key=lambda m: (m.pos, m.kind))
+    return out

@@ -1,0 +1,71 @@
+"""Instruction files (``icrsumo-instructions/1``): one JSON file per route holding the baseline
+sequence and every variant sequence. See the README for the format."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+from ..errors import InputError
+from ..types import Instruction, InstructionSet, Intent, Maneuver, Notice
+from .intent import classify_intent
+
+FORMAT = "icrsumo-instructions/1"
+
+
+def instruction_dict(ins: Instruction) -> dict:
+    d = asdict(ins)
+    d["intent"] = ins.intent.value
+    d["classified"] = classify_intent(ins.text).value
+    return d
+
+
+def route_document(baseline: InstructionSet, variants: list[InstructionSet],
+                   maneuvers: list[Maneuver], meta: dict) -> dict:
+    """The JSON document of one route: ``meta`` keys first, then maneuvers, notices, sets."""
+    return {
+        "format": FORMAT,
+        "route_id": baseline.route_id,
+        **meta,
+        "route_seed": baseline.seed,
+        "maneuvers": [dict(asdict(m), intent=m.intent.value) for m in maneuvers],
+        "notices": [dict(asdict(n), intent=n.intent.value) for n in baseline.notices],
+        "sets": [
+            {"family": s.family, "k": s.k, "seed": s.seed,
+             "instructions": [instruction_dict(i) for i in s.instructions]}
+            for s in (baseline, *variants)
+        ],
+    }
+
+
+def _instruction(d: dict) -> Instruction:
+    return Instruction(
+        id=int(d["id"]), trigger=float(d["trigger"]), text=str(d["text"]), intent=Intent(d["intent"]),
+        type=str(d["type"]), distance=None if d.get("distance") is None else float(d["distance"]),
+        maneuver_pos=None if d.get("maneuver_pos") is None else float(d["maneuver_pos"]),
+        junction=d.get("junction", ""), template=d.get("template", ""), source=d.get("source", ""),
+    )
+
+
+def read_instruction_sets(path: Path) -> list[InstructionSet]:
+    """All sequences of a route file: the baseline first, then variants in file order."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(path, "", "instruction file not found", "run icrsumo generate") from None
+    except json.JSONDecodeError as err:
+        raise InputError(path, f"line {err.lineno}", "malformed JSON", "re-run icrsumo generate") from None
+    if doc.get("format") != FORMAT:
+        raise InputError(path, "format", f"expected {FORMAT}", "re-run icrsumo generate")
+    notices = tuple(
+        Notice(id=int(n["id"]), trigger=float(n["trigger"]), end=float(n["end"]), text=n["text"],
+               type=n["type"], intent=Intent(n["intent"]))
+        for n in doc.get("notices", [])
+    )
+    return [
+        InstructionSet(route_id=doc["route_id"], family=s["family"], k=int(s["k"]), seed=int(s["seed"]),
+                       instructions=tuple(_instruction(i) for i in s["instructions"]), notices=notices)
+        for s in doc["sets"]
+    ]

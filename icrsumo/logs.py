@@ -1,0 +1,307 @@
+"""Compact, byte-stable JSON of episode logs and results.
+
+A log is stored as::
+
+    {"version": 1, "route_id": ..., "agent": ..., "family": ..., "k": ..., "seed": ...,
+     "step_length": ..., "route_length": ..., "termination": ..., "termination_t": ...,
+     "message": ..., "steps": {"t": [...], "x": [...], ...}, "events": [[kind, t, pos, other, x, y], ...]}
+
+Keys come in that fixed order, per-step values are columns, and floats are rounded (t and
+termination_t to 1e-3 s, x/y/progress/route_dist/pos/route_length to 0.01 m, yaw to 1e-4 rad,
+speed to 1e-3 m/s, step_length to 1e-6 s), so the same episode always gives the same bytes and
+already-rounded logs round-trip exactly. Malformed input raises
+:class:`~icrsumo.errors.InputError` naming the key.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from icrsumo.errors import InputError
+from icrsumo.fsio import dumps_json, write_atomic
+from icrsumo.metrics import EVENT_KINDS
+from icrsumo.types import TERMINATIONS, EpisodeLog, EpisodeResult, Event, Infraction, TerminationClass
+
+LOG_VERSION = 1
+
+#: per-step column -> decimals (None: integer column)
+STEP_COLUMNS: dict[str, int | None] = {
+    "t": 3,
+    "x": 2,
+    "y": 2,
+    "yaw": 4,
+    "speed": 3,
+    "progress": 2,
+    "instruction": None,
+    "outside": None,
+    "route_dist": 2,
+}
+
+#: event fields in stored order -> decimals (None: string)
+EVENT_FIELDS: dict[str, int | None] = {"kind": None, "t": 3, "pos": 2, "other": None, "x": 2, "y": 2}
+
+_HEADER = ("version", "route_id", "agent", "family", "k", "seed", "step_length", "route_length",
+           "termination", "termination_t", "message", "steps", "events")
+
+_DEFAULT_SOURCE = "<episode log>"
+
+
+def _r(value: float, decimals: int, name: str) -> float:
+    v = float(value)
+    if not math.isfinite(v):
+        raise ValueError(f"episode log: {name} is not finite ({v!r})")
+    return round(v, decimals) + 0.0  # + 0.0 turns -0.0 into 0.0
+
+
+def log_to_dict(log: EpisodeLog) -> dict[str, Any]:
+    """The log as plain JSON types, keys in fixed order, floats rounded. Raises ValueError for
+    non-finite numbers or columns of unequal length."""
+    n = len(log.t)
+    steps: dict[str, list] = {}
+    for col, dec in STEP_COLUMNS.items():
+        values = getattr(log, col)
+        if len(values) != n:
+            raise ValueError(f"episode log: column {col!r} has {len(values)} entries, t has {n}")
+        if dec is None:
+            steps[col] = [int(v) for v in values]
+        else:
+            steps[col] = [_r(v, dec, f"steps.{col}[{i}]") for i, v in enumerate(values)]
+    events = [
+        [e.kind, _r(e.t, 3, f"events[{i}].t"), _r(e.pos, 2, f"events[{i}].pos"), e.other,
+         _r(e.x, 2, f"events[{i}].x"), _r(e.y, 2, f"events[{i}].y")]
+        for i, e in enumerate(log.events)
+    ]
+    return {
+        "version": LOG_VERSION,
+        "route_id": log.route_id,
+        "agent": log.agent,
+        "family": log.family,
+        "k": int(log.k),
+        "seed": int(log.seed),
+        "step_length": _r(log.step_length, 6, "step_length"),
+        "route_length": _r(log.route_length, 2, "route_length"),
+        "termination": log.termination,
+        "termination_t": _r(log.termination_t, 3, "termination_t"),
+        "message": log.message,
+        "steps": steps,
+        "events": events,
+    }
+
+
+class _Reader:
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, place: str, problem: str, fix: str = "") -> InputError:
+        return InputError(self.source, place, problem, fix)
+
+    def get(self, d: dict, key: str, prefix: str = "") -> Any:
+        if key not in d:
+            raise self.fail(prefix + key, f"missing key {key!r}", "write episode logs with icrsumo.logs")
+        return d[key]
+
+    def string(self, v: Any, place: str) -> str:
+        if not isinstance(v, str):
+            raise self.fail(place, f"expected a string, got {type(v).__name__}")
+        return v
+
+    def integer(self, v: Any, place: str) -> int:
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.fail(place, f"expected an integer, got {v!r}")
+        return v
+
+    def number(self, v: Any, place: str) -> float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise self.fail(place, f"expected a finite number, got {v!r}")
+        return float(v)
+
+
+def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
+    """Build an :class:`EpisodeLog` from :func:`log_to_dict` output, checking every key.
+    ``source`` (a file name) is used in error messages."""
+    rd = _Reader(source)
+    if not isinstance(d, dict):
+        raise rd.fail("", f"an episode log must be a JSON object, got {type(d).__name__}")
+    unknown = sorted(set(d) - set(_HEADER))
+    if unknown:
+        raise rd.fail(unknown[0], f"unknown key {unknown[0]!r}", f"allowed keys: {', '.join(_HEADER)}")
+    version = rd.integer(rd.get(d, "version"), "version")
+    if version != LOG_VERSION:
+        raise rd.fail("version", f"unsupported episode log version {version}", f"expected {LOG_VERSION}")
+    termination = rd.string(rd.get(d, "termination"), "termination")
+    if termination not in TERMINATIONS:
+        raise rd.fail("termination", f"unknown termination {termination!r}",
+                      f"one of {', '.join(TERMINATIONS)}")
+    step_length = rd.number(rd.get(d, "step_length"), "step_length")
+    if step_length <= 0:
+        raise rd.fail("step_length", f"step_length must be > 0, got {step_length}")
+    route_length = rd.number(rd.get(d, "route_length"), "route_length")
+    if route_length < 0:
+        raise rd.fail("route_length", f"route_length must be >= 0, got {route_length}")
+
+    steps = rd.get(d, "steps")
+    if not isinstance(steps, dict):
+        raise rd.fail("steps", "expected an object of per-step columns")
+    extra = sorted(set(steps) - set(STEP_COLUMNS))
+    if extra:
+        raise rd.fail(f"steps.{extra[0]}", f"unknown column {extra[0]!r}",
+                      f"allowed columns: {', '.join(STEP_COLUMNS)}")
+    cols: dict[str, tuple] = {}
+    for col, dec in STEP_COLUMNS.items():
+        raw = rd.get(steps, col, "steps.")
+        if not isinstance(raw, list):
+            raise rd.fail(f"steps.{col}", f"expected a list, got {type(raw).__name__}")
+        conv = rd.integer if dec is None else rd.number
+        cols[col] = tuple(conv(v, f"steps.{col}[{i}]") for i, v in enumerate(raw))
+    n = len(cols["t"])
+    for col, values in cols.items():
+        if len(values) != n:
+            raise rd.fail(f"steps.{col}", f"has {len(values)} entries but steps.t has {n}",
+                          "all step columns must have equal length")
+    for i in range(1, n):
+        if cols["t"][i] <= cols["t"][i - 1]:
+            raise rd.fail(f"steps.t[{i}]", f"time {cols['t'][i]} is not after {cols['t'][i - 1]}",
+                          "step times must increase")
+        if cols["progress"][i] < cols["progress"][i - 1]:
+            raise rd.fail(f"steps.progress[{i}]", "progress decreased",
+                          "progress is the furthest route position reached, so it never decreases")
+    for i, v in enumerate(cols["outside"]):
+        if v not in (0, 1):
+            raise rd.fail(f"steps.outside[{i}]", f"expected 0 or 1, got {v}")
+
+    raw_events = rd.get(d, "events")
+    if not isinstance(raw_events, list):
+        raise rd.fail("events", f"expected a list, got {type(raw_events).__name__}")
+    events = []
+    for i, ev in enumerate(raw_events):
+        if not isinstance(ev, list) or len(ev) != len(EVENT_FIELDS):
+            raise rd.fail(f"events[{i}]", f"expected a list [{', '.join(EVENT_FIELDS)}], got {ev!r}")
+        kind = rd.string(ev[0], f"events[{i}].kind")
+        if kind not in EVENT_KINDS:
+            raise rd.fail(f"events[{i}].kind", f"unknown event kind {kind!r}",
+                          f"one of {', '.join(sorted(EVENT_KINDS))}")
+        events.append(Event(
+            kind=kind,
+            t=rd.number(ev[1], f"events[{i}].t"),
+            pos=rd.number(ev[2], f"events[{i}].pos"),
+            other=rd.string(ev[3], f"events[{i}].other"),
+            x=rd.number(ev[4], f"events[{i}].x"),
+            y=rd.number(ev[5], f"events[{i}].y"),
+        ))
+
+    return EpisodeLog(
+        route_id=rd.string(rd.get(d, "route_id"), "route_id"),
+        agent=rd.string(rd.get(d, "agent"), "agent"),
+        family=rd.string(rd.get(d, "family"), "family"),
+        k=rd.integer(rd.get(d, "k"), "k"),
+        seed=rd.integer(rd.get(d, "seed"), "seed"),
+        step_length=step_length,
+        route_length=route_length,
+        t=cols["t"],
+        x=cols["x"],
+        y=cols["y"],
+        yaw=cols["yaw"],
+        speed=cols["speed"],
+        progress=cols["progress"],
+        instruction=cols["instruction"],
+        outside=cols["outside"],
+        route_dist=cols["route_dist"],
+        events=tuple(events),
+        termination=termination,
+        termination_t=rd.number(rd.get(d, "termination_t"), "termination_t"),
+        message=rd.string(d.get("message", ""), "message"),
+    )
+
+
+def dumps_log(log: EpisodeLog) -> str:
+    """Canonical JSON text of a log (one line per column, one line per event)."""
+    return dumps_json(log_to_dict(log))
+
+
+def loads_log(text: str, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
+    """Parse :func:`dumps_log` output; malformed text raises InputError."""
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError as err:
+        place = f"line {err.lineno} column {err.colno}"
+        raise InputError(source, place, f"not valid JSON: {err.msg}") from None
+    return log_from_dict(d, source)
+
+
+def write_log(path: Path | str, log: EpisodeLog) -> None:
+    """Write a log atomically as canonical JSON."""
+    write_atomic(Path(path), dumps_log(log))
+
+
+def read_log(path: Path | str) -> EpisodeLog:
+    """Read a log written by :func:`write_log`."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as err:
+        raise InputError(str(path), "", f"cannot read episode log: {err.strerror or err}") from None
+    return loads_log(text, str(path))
+
+
+def result_to_dict(result: EpisodeResult) -> dict[str, Any]:
+    """An :class:`EpisodeResult` as plain JSON types (IS under the key ``"is"``; infractions as
+    ``[kind, factor, t, pos, other]`` lists)."""
+    return {
+        "route_id": result.route_id,
+        "agent": result.agent,
+        "family": result.family,
+        "k": int(result.k),
+        "rc": float(result.rc),
+        "is": float(result.is_),
+        "ds": float(result.ds),
+        "termination": result.termination,
+        "termination_class": TerminationClass(result.termination_class).value,
+        "outside_lanes_pct": float(result.outside_lanes_pct),
+        "duration": float(result.duration),
+        "infractions": [[i.kind, float(i.factor), float(i.t), float(i.pos), i.other]
+                        for i in result.infractions],
+    }
+
+
+def result_from_dict(d: Any, source: str = "<episode result>") -> EpisodeResult:
+    """Inverse of :func:`result_to_dict`; malformed input raises InputError."""
+    rd = _Reader(source)
+    if not isinstance(d, dict):
+        raise rd.fail("", f"an episode result must be a JSON object, got {type(d).__name__}")
+    termination = rd.string(rd.get(d, "termination"), "termination")
+    if termination not in TERMINATIONS:
+        raise rd.fail("termination", f"unknown termination {termination!r}")
+    cls = rd.string(rd.get(d, "termination_class"), "termination_class")
+    if cls != TERMINATIONS[termination].value:
+        raise rd.fail("termination_class", f"{cls!r} does not match termination {termination!r}")
+    raw = rd.get(d, "infractions")
+    if not isinstance(raw, list):
+        raise rd.fail("infractions", "expected a list")
+    infractions = []
+    for i, it in enumerate(raw):
+        if not isinstance(it, list) or len(it) != 5:
+            raise rd.fail(f"infractions[{i}]", f"expected [kind, factor, t, pos, other], got {it!r}")
+        infractions.append(Infraction(
+            kind=rd.string(it[0], f"infractions[{i}].kind"),
+            factor=rd.number(it[1], f"infractions[{i}].factor"),
+            t=rd.number(it[2], f"infractions[{i}].t"),
+            pos=rd.number(it[3], f"infractions[{i}].pos"),
+            other=rd.string(it[4], f"infractions[{i}].other"),
+        ))
+    return EpisodeResult(
+        route_id=rd.string(rd.get(d, "route_id"), "route_id"),
+        agent=rd.string(rd.get(d, "agent"), "agent"),
+        family=rd.string(rd.get(d, "family"), "family"),
+        k=rd.integer(rd.get(d, "k"), "k"),
+        rc=rd.number(rd.get(d, "rc"), "rc"),
+        is_=rd.number(rd.get(d, "is"), "is"),
+        ds=rd.number(rd.get(d, "ds"), "ds"),
+        termination=termination,
+        termination_class=TERMINATIONS[termination],
+        infractions=tuple(infractions),
+        outside_lanes_pct=rd.number(rd.get(d, "outside_lanes_pct"), "outside_lanes_pct"),
+        duration=rd.number(rd.get(d, "duration"), "duration"),
+    )
