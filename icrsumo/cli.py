@@ -62,6 +62,33 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     return 2 if failures else 0
 
 
+def _cmd_run_episode(args: argparse.Namespace) -> int:
+    from .agents.registry import make_agent
+    from .instructions.store import read_instruction_sets
+    from .logs import result_to_dict, write_log
+    from .metrics import score_episode
+    from .runner import RunOptions, run_episode
+    from .scenario import read_scenario
+
+    sc = read_scenario(Path(args.scenario))
+    sets = read_instruction_sets(Path(args.instructions))
+    chosen = [s for s in sets if s.family == args.family and (s.k == args.k or args.family == "baseline")]
+    if not chosen:
+        have = sorted({f"{s.family}:{s.k}" for s in sets})
+        raise InputError(args.instructions, f"{args.family} k={args.k}", "no such instruction set",
+                         f"pick one of {', '.join(have[:6])}, ...")
+    agent = make_agent(args.agent)
+    log = run_episode(sc, chosen[0], agent, RunOptions(video=Path(args.video) if args.video else None))
+    result = score_episode(log)
+    if args.log:
+        write_log(Path(args.log), log)
+    r = result_to_dict(result)
+    print(f"{sc.route_id} {args.agent} {args.family}:{chosen[0].k}  DS {r['ds']:.1f}  RC {r['rc']:.1f}  "
+          f"IS {r['is']:.3f}  {result.termination} ({result.termination_class.value})  "
+          f"infractions {[i.kind for i in result.infractions]}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="icrsumo",
@@ -112,6 +139,22 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--cache", type=Path, help="LLM answer cache (default OUT/llm_cache)")
     g.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
     g.set_defaults(func=_cmd_generate)
+
+    e = sub.add_parser(
+        "run-episode", help="drive one closed-loop episode and score it",
+        description="Run one scenario with one instruction sequence and one agent in SUMO; print "
+        "its Leaderboard scores; optionally write the episode log and a BEV video.",
+    )
+    e.add_argument("scenario", help="a scenario folder written by convert-routes")
+    e.add_argument("--instructions", required=True, help="the route's file written by generate")
+    e.add_argument("--family", default="baseline",
+                   choices=["baseline", "paraphrase", "ambiguity", "noise", "misleading"])
+    e.add_argument("--k", type=int, default=0, help="variant index (default 0)")
+    e.add_argument("--agent", default="instruction-follower",
+                   help="route-oracle or instruction-follower (default)")
+    e.add_argument("--log", help="write the episode log (JSON) here")
+    e.add_argument("--video", help="write a BEV video with the instruction overlaid (.mp4)")
+    e.set_defaults(func=_cmd_run_episode)
     return parser
 
 

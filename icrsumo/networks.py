@@ -105,6 +105,7 @@ class RoadNet:
             e for r in net.getRoundabouts() for e in r.getEdges()
         )
         self.has_sidewalks = False
+        self._cum_cache: dict[str, np.ndarray] = {}
         self._arms: dict[str, set[str]] = {}
         #: nodes with pedestrian crossings
         self.crossing_nodes: frozenset[str] = frozenset()
@@ -231,26 +232,36 @@ class RoadNet:
             return x - ox, -(y - oy), -math.degrees(heading)
         return x, y, math.degrees(heading)
 
+    def _cum(self, lane: str) -> np.ndarray:
+        """Cumulative shape length (m) at each point of a lane (cached)."""
+        cum = self._cum_cache.get(lane)
+        if cum is None:
+            cum = self._cum_cache[lane] = _polyline_cumlen(self.lane_shape[lane])
+        return cum
+
     def lane_pose(self, lane: str, pos: float) -> tuple[float, float, float]:
         """World (x, y, heading) at lane position ``pos`` (m from the lane start)."""
         shape = self.lane_shape[lane]
-        cum = _polyline_cumlen(shape)
-        s = float(np.clip(pos * cum[-1] / max(self.lane_length[lane], 1e-9), 0.0, cum[-1]))
-        k = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(shape) - 2))
-        seg = shape[k + 1] - shape[k]
-        seg_len = max(cum[k + 1] - cum[k], 1e-9)
-        p = shape[k] + seg * ((s - cum[k]) / seg_len)
-        return float(p[0]), float(p[1]), math.atan2(seg[1], seg[0])
+        cum = self._cum(lane)
+        total = float(cum[-1])
+        s = min(max(pos * total / max(self.lane_length[lane], 1e-9), 0.0), total)
+        k = min(max(int(np.searchsorted(cum, s, side="right")) - 1, 0), len(shape) - 2)
+        x0, y0 = shape[k]
+        x1, y1 = shape[k + 1]
+        seg_len = max(float(cum[k + 1] - cum[k]), 1e-9)
+        f = (s - float(cum[k])) / seg_len
+        return float(x0 + (x1 - x0) * f), float(y0 + (y1 - y0) * f), math.atan2(y1 - y0, x1 - x0)
 
     def lane_slice(self, lane: str, a: float, b: float) -> np.ndarray:
         """Lane centre line between lane positions a <= b (m), shape (N, 2)."""
         shape = self.lane_shape[lane]
-        cum = _polyline_cumlen(shape)
-        scale = cum[-1] / max(self.lane_length[lane], 1e-9)
-        sa, sb = float(np.clip(a * scale, 0, cum[-1])), float(np.clip(b * scale, 0, cum[-1]))
+        cum = self._cum(lane)
+        total = float(cum[-1])
+        scale = total / max(self.lane_length[lane], 1e-9)
+        sa, sb = min(max(a * scale, 0.0), total), min(max(b * scale, 0.0), total)
         inner = shape[(cum > sa) & (cum < sb)]
-        pa = np.array(self.lane_pose(lane, a)[:2])
-        pb = np.array(self.lane_pose(lane, b)[:2])
+        pa = self.lane_pose(lane, a)[:2]
+        pb = self.lane_pose(lane, b)[:2]
         return np.vstack([pa, inner, pb])
 
     def project(self, x: float, y: float, radius: float) -> list[tuple[str, float, float, float]]:
@@ -269,7 +280,7 @@ class RoadNet:
         out = []
         for li, s in best.items():
             lid = self._lane_ids[li]
-            shape_len = _polyline_cumlen(self.lane_shape[lid])[-1]
+            shape_len = self._cum(lid)[-1]
             s_along = self._seg_start[s] + t[s] * math.sqrt(ab2[s])
             pos = s_along * self.lane_length[lid] / max(shape_len, 1e-9)
             out.append((lid, float(pos), float(dist[s]), math.atan2(ab[s, 1], ab[s, 0])))

@@ -176,6 +176,16 @@ class BevRenderer:
             axis=-1,
         )
 
+    def drivable_at(self, points: np.ndarray) -> np.ndarray:
+        """Whether each world point (N, 2) m lies on the drivable area (car lanes, junctions);
+        points outside the canvas are not drivable. Returns (N,) bool."""
+        cr = np.rint(self._world_to_canvas(np.asarray(points, dtype=float).reshape(-1, 2))).astype(int)
+        h, w = self.canvas.shape[:2]
+        inside = (cr[:, 0] >= 0) & (cr[:, 0] < w) & (cr[:, 1] >= 0) & (cr[:, 1] < h)
+        out = np.zeros(len(cr), dtype=bool)
+        out[inside] = self.canvas[cr[inside, 1], cr[inside, 0], 0] > 0
+        return out
+
     def _stop_line(self, lane_id: str) -> tuple[np.ndarray, np.ndarray]:
         """Stop line of a lane: (left end, right end) in world m, perpendicular to the lane's last
         segment, set back half a line thickness from the lane end; drawn with the stop-line

@@ -102,6 +102,14 @@ def _ego_route(sc: Scenario) -> EgoRoute:
     )
 
 
+def _corners(st: EgoState, size: tuple[float, float]) -> np.ndarray:
+    """The ego footprint's four corners (4, 2) m; ``size`` = (length, width) m."""
+    c, s = math.cos(st.yaw), math.sin(st.yaw)
+    hl, hw = 0.5 * size[0], 0.5 * size[1]
+    local = np.array([[hl, hw], [hl, -hw], [-hl, -hw], [-hl, hw]])
+    return np.stack([st.x + local[:, 0] * c - local[:, 1] * s, st.y + local[:, 0] * s + local[:, 1] * c], 1)
+
+
 def _angle_diff(a: float, b: float) -> float:
     return abs((a - b + math.pi) % (2 * math.pi) - math.pi)
 
@@ -127,7 +135,7 @@ class _Sensors:
         return lane.rsplit("_", 1)[0] in self.route_edges
 
     def lane_events(self, t: float, pos: float, lane: str, lane_pos: float, st: EgoState,
-                    tl_prev: dict[str, str]) -> list[Event]:
+                    tl_prev: dict[str, str], drivable, size: tuple[float, float]) -> list[Event]:
         ev: list[Event] = []
         net = self.net
         # stop-sign bookkeeping: stopped within the last STOP_ZONE m of a lane
@@ -149,8 +157,8 @@ class _Sensors:
                             ev.append(Event("stop_sign", t, pos, net.edge_to_node.get(edge, ""), st.x, st.y))
         if lane and lane != prev and not lane.startswith(":"):
             self.stopped.discard(lane)  # a fresh approach to this lane's end
-        # roadside (footprint off the drivable area: SUMO has no lane for the ego)
-        off = lane == ""
+        # roadside: the footprint left the drivable area (two corners or more off it)
+        off = int((~drivable(_corners(st, size))).sum()) >= 2
         if off and not self.roadside:
             ev.append(Event("collision_static", t, pos, "roadside", st.x, st.y))
         self.roadside = off
@@ -272,7 +280,8 @@ def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
                 if colls:
                     persons = set(ls.person.getIDList())
                     step_events += sensors.collisions(t, progress, state, colls, persons)
-                step_events += sensors.lane_events(t, progress, lane, lane_pos, state, tl_prev)
+                step_events += sensors.lane_events(t, progress, lane, lane_pos, state, tl_prev,
+                                                   renderer.drivable_at, (params.length, params.width))
                 for vid in ls.simulation.getStartingTeleportIDList():
                     if vid != EGO_ID:
                         step_events.append(Event("teleport_background", t, progress, vid))

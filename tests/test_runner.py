@@ -188,3 +188,41 @@ def test_agents_on_the_tiny_suite(converted, generated):
     assert np.mean(base_rc) - np.mean(scores["misled_rc"]) >= 20, scores
     failures = [rd for rd, rc in zip(scores["misled_rd"], scores["misled_rc"]) if rc < 100]
     assert sum(failures) > len(failures) / 2
+
+
+def test_stop_sign_run_is_an_infraction_and_stopping_is_not(quiet):
+    from icrsumo.networks import load_net
+
+    sc, sets = _load(quiet, "tiny", "tiny_014")  # a priority_stop junction on the route
+    net = load_net(sc.net)
+    j = next(j for j in sc.manifest["junctions"]
+             if {c.state for c in net.connections[(j["from_edge"], j["to_edge"])]} & {"s", "w"})
+    blind = run_episode(sc, sets[0], BlindOracle(speed=6.0))
+    assert [e.kind for e in blind.events].count("stop_sign") == 1
+    assert any(i.kind == "stop_sign" and i.factor == 0.8 for i in score_episode(blind).infractions)
+    careful = run_episode(sc, sets[0], RouteOracle())
+    assert careful.termination == "completed" and careful.progress[-1] > j["pos"]
+    assert not [e for e in careful.events if e.kind == "stop_sign"]
+
+
+class Swerve(RouteOracle):
+    """Steers hard left at a steady throttle: leaves the road."""
+
+    name = "swerve"
+
+    def act(self, obs):
+        from icrsumo.agents.base import Action
+        from icrsumo.dynamics import Control
+
+        return Action(control=Control(steer=1.0, throttle=0.4))
+
+
+def test_leaving_the_drivable_area_is_a_static_collision_and_video(quiet, tmp_path):
+    from icrsumo.runner import RunOptions
+
+    sc, sets = _load(quiet, "tiny", "tiny_003")
+    video = tmp_path / "ep.mp4"
+    log = run_episode(sc, sets[0], Swerve(), RunOptions(video=video))
+    assert any(e.kind == "collision_static" for e in log.events)
+    assert any(i.kind == "collision_static" for i in score_episode(log).infractions)
+    assert video.exists() or video.with_suffix(".avi").exists()
