@@ -89,6 +89,36 @@ def _cmd_run_episode(args: argparse.Namespace) -> int:
     return 0
 
 
+def _split_list(items: list[str] | None) -> tuple[str, ...]:
+    return tuple(x for item in items or [] for x in item.split(",") if x)
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from .agents.registry import DEFAULT_AGENT
+    from .evaluate import EvalOptions, evaluate
+    from .instructions.families import FAMILIES
+
+    opts = EvalOptions(
+        out=Path(args.out), suite=args.suite, agents=_split_list(args.agent) or (DEFAULT_AGENT,),
+        families=_split_list(args.family) or FAMILIES, k=args.k, seed=args.seed,
+        routes=_split_list(args.routes) or None, workers=args.workers, backend=args.backend,
+        address=args.address, traffic=args.traffic, quiet=args.quiet, rollout_route=args.rollout_route,
+    )
+    t0 = time.perf_counter()
+    summary = evaluate(opts)
+    ep = summary["episodes"]
+    print(f"{ep['done']} episodes done, {ep['crashed']} crashed, {time.perf_counter() - t0:.0f} s -> "
+          f"{args.out}", file=sys.stderr)
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from .evaluate import report_only
+
+    report_only(Path(args.out), quiet=args.quiet)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="icrsumo",
@@ -155,6 +185,37 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--log", help="write the episode log (JSON) here")
     e.add_argument("--video", help="write a BEV video with the instruction overlaid (.mp4)")
     e.set_defaults(func=_cmd_run_episode)
+
+    v = sub.add_parser(
+        "evaluate", help="the paired ICR protocol: baseline vs counterfactual instructions",
+        description="Run every agent on every route with the baseline instructions and K variants "
+        "of each family (same scenario, seed, traffic), store each episode at once (resumable), "
+        "and write summary.json, tables and figures.",
+    )
+    v.add_argument("--suite", default="tiny",
+                   help="tiny (default), short, long, a route XML file or a convert-routes folder")
+    v.add_argument("--agent", action="append",
+                   help="built-in name, module:Class or path/file.py:Class (repeatable; default "
+                   "instruction-follower)")
+    v.add_argument("--family", action="append",
+                   help="paraphrase, ambiguity, noise, misleading (repeatable; default all four)")
+    v.add_argument("--k", type=int, default=8, help="variants per family (default 8)")
+    v.add_argument("--seed", type=int, default=2026, help="seed of the variant draws (default 2026)")
+    v.add_argument("--routes", action="append", help="only these route ids (comma separated)")
+    v.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="worker processes, one SUMO each (default: number of cores)")
+    v.add_argument("--backend", default="local", help="local (default) or ray")
+    v.add_argument("--address", help="Ray cluster address for --backend ray")
+    v.add_argument("--traffic", choices=["none", "light", "normal", "dense"], default="normal")
+    v.add_argument("--out", default="icr_out", help="output folder (default icr_out)")
+    v.add_argument("--rollout-route", help="route of the paired rollout figure (default: the first)")
+    v.add_argument("--quiet", action="store_true", help="no progress bar or table")
+    v.set_defaults(func=_cmd_evaluate)
+
+    r = sub.add_parser("report", help="rebuild summary, tables and figures of an evaluation folder")
+    r.add_argument("out", help="the --out folder of icrsumo evaluate")
+    r.add_argument("--quiet", action="store_true")
+    r.set_defaults(func=_cmd_report)
     return parser
 
 

@@ -303,3 +303,31 @@ class EpisodeResult:
     infractions: tuple[Infraction, ...]
     outside_lanes_pct: float
     duration: float
+
+
+@dataclass(frozen=True)
+class EpisodeRecord:
+    """One stored episode of an evaluation, keyed by (agent, route_id, family, k, seed).
+
+    ``family`` is "baseline" (k = 0) or a counterfactual family; ``status`` is "done" or
+    "crashed" (scores are then 0 and ``message`` says why). DS and RC in 0-100, IS in 0-1;
+    ``termination_class`` is done, RD or TO; ``infractions`` holds (kind, factor) pairs;
+    ``length`` (m) and ``duration`` (simulated s) describe the route and the episode.
+    """
+
+    agent: str
+    route_id: str
+    family: str
+    k: int
+    seed: int
+    status: str
+    ds: float = 0.0
+    rc: float = 0.0
+    is_: float = 0.0
+    termination: str = ""
+    termination_class: str = ""
+    infractions: tuple[tuple[str, float], ...] = ()
+    length: float = 0.0
+    duration: float = 0.0
+    attempts: int = 1
+    message: str = ""

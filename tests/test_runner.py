@@ -155,7 +155,7 @@ def test_stopped_ego_ends_as_to_after_180_s(quiet):
 
 def test_registry():
     assert make_agent("route-oracle").name == "route-oracle"
-    with pytest.raises(InputError, match="unknown agent"):
+    with pytest.raises(InputError, match="not a built-in agent"):
         make_agent("nope")
 
 

@@ -1,0 +1,189 @@
+"""ICR-Drive aggregation of stored episodes: means, paired deltas, RD/TO split, bootstrap CIs.
+
+Pure (numpy only): the same records, in any order, give the same summary bytes.
+
+Definitions (per agent and family f; crashed episodes are counted and excluded from every mean):
+
+- DS, RC, IS: plain means over the family's episodes (routes x k);
+- the pairing unit is a route r (with its seed); only routes whose baseline episode is not
+  crashed take part. dM = mean over all pairs (r, k) of M(r, f, k) - M(r, baseline);
+- worst_dDS = mean over routes of min over k of dDS_{f,k}(r);
+- dDS_ci95 / dRC_ci95: paired bootstrap 95 % percentile interval that resamples routes with
+  replacement, each route contributing its mean delta over k (``numpy.random.default_rng``
+  seeded with ``boot_seed`` afresh for every agent and family, so one family's interval does
+  not depend on which other agents or families are in the records);
+- RD, TO: fraction of the family's episodes whose termination class is RD / TO;
+- baseline_done_variant_failed: routes whose baseline terminated "done" while at least one
+  (non-crashed) variant of the family did not.
+
+Values are rounded (4 decimals, IS and dIS 6); a quantity without data is ``None``, never NaN.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
+
+from .types import EpisodeRecord
+
+FAMILIES = ("paraphrase", "ambiguity", "noise", "misleading")
+BASELINE = "baseline"
+
+_Key = tuple[str, int]  # (route_id, seed): the pairing unit
+
+
+def _key(r: EpisodeRecord) -> tuple:
+    return (r.agent, r.route_id, r.family, r.k, r.seed)
+
+
+def _sorted_unique(records: Iterable[EpisodeRecord]) -> list[EpisodeRecord]:
+    out = sorted(records, key=_key)
+    for a, b in zip(out, out[1:]):
+        if _key(a) == _key(b):
+            raise ValueError(f"duplicate episode record {_key(a)}")
+    return out
+
+
+def _rnd(x: float | None, nd: int = 4) -> float | None:
+    if x is None:
+        return None
+    x = float(x)
+    if not np.isfinite(x):
+        return None
+    return round(x, nd) + 0.0  # + 0.0 turns -0.0 into 0.0
+
+
+def _mean(values: Sequence[float], nd: int = 4) -> float | None:
+    return _rnd(float(np.mean(values)), nd) if len(values) else None
+
+
+def _share(recs: Sequence[EpisodeRecord], cls: str) -> float | None:
+    if not recs:
+        return None
+    return _rnd(sum(r.termination_class == cls for r in recs) / len(recs))
+
+
+def _absolute(recs: Sequence[EpisodeRecord]) -> dict[str, Any]:
+    return {
+        "DS": _mean([r.ds for r in recs]),
+        "RC": _mean([r.rc for r in recs]),
+        "IS": _mean([r.is_ for r in recs], 6),
+        "RD": _share(recs, "RD"),
+        "TO": _share(recs, "TO"),
+        "n": len(recs),
+    }
+
+
+def bootstrap_ci(route_means: np.ndarray, *, n_boot: int, seed: int,
+                 level: float = 0.95) -> np.ndarray | None:
+    """Percentile bootstrap interval(s) of the mean over routes.
+
+    ``route_means`` is (R,) or (R, M) (one column per metric; all columns share the resampled
+    route indices). Returns (2,) or (2, M) [lo, hi], or None when R = 0.
+    """
+    vals = np.asarray(route_means, dtype=float)
+    n = vals.shape[0]
+    if n == 0:
+        return None
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, n, size=(n_boot, n))
+    boots = vals[idx].mean(axis=1)  # (n_boot,) or (n_boot, M)
+    alpha = (1.0 - level) / 2.0
+    return np.percentile(boots, [100.0 * alpha, 100.0 * (1.0 - alpha)], axis=0)
+
+
+def _family_block(recs: list[EpisodeRecord], base: dict[_Key, EpisodeRecord], *,
+                  n_boot: int, boot_seed: int) -> dict[str, Any]:
+    block = _absolute(recs)
+    out: dict[str, Any] = {"DS": block["DS"], "RC": block["RC"], "IS": block["IS"]}
+
+    per_route: dict[_Key, list[tuple[float, float, float]]] = {}
+    failed: set[_Key] = set()
+    for r in recs:  # sorted, so per-route lists are in k order
+        b = base.get((r.route_id, r.seed))
+        if b is None:
+            continue
+        per_route.setdefault((r.route_id, r.seed), []).append((r.ds - b.ds, r.rc - b.rc, r.is_ - b.is_))
+        if b.termination_class == "done" and r.termination_class != "done":
+            failed.add((r.route_id, r.seed))
+    routes = sorted(per_route)
+    deltas = [np.asarray(per_route[k], dtype=float) for k in routes]
+    if deltas:
+        pairs = np.concatenate(deltas, axis=0)  # (pairs, 3): dDS, dRC, dIS
+        d_mean = pairs.mean(axis=0)
+        worst = float(np.mean([d[:, 0].min() for d in deltas]))
+        route_means = np.stack([d[:, :2].mean(axis=0) for d in deltas])  # (R, 2)
+        ci = bootstrap_ci(route_means, n_boot=n_boot, seed=boot_seed)
+        out.update(
+            dDS=_rnd(d_mean[0]), dRC=_rnd(d_mean[1]), dIS=_rnd(d_mean[2], 6), worst_dDS=_rnd(worst),
+            dDS_ci95=[_rnd(ci[0, 0]), _rnd(ci[1, 0])], dRC_ci95=[_rnd(ci[0, 1]), _rnd(ci[1, 1])],
+        )
+    else:
+        out.update(dDS=None, dRC=None, dIS=None, worst_dDS=None, dDS_ci95=None, dRC_ci95=None)
+    out.update(
+        RD=block["RD"], TO=block["TO"], n=block["n"], n_routes=len(routes),
+        baseline_done_variant_failed=len(failed),
+        n_pairs=int(sum(len(d) for d in deltas)),
+    )
+    return out
+
+
+def summarize(records: Iterable[EpisodeRecord], *, suite: str, seed: int, k: int,
+              families: Sequence[str] = FAMILIES, n_boot: int = 2000, boot_seed: int = 2026) -> dict:
+    """ICR-Drive summary of an evaluation (see the module docstring for the definitions).
+
+    Only baseline records and records of ``families`` are considered; agents are listed in
+    sorted order, families in the given order. ``n_routes`` is the number of routes that
+    contribute paired deltas, ``n_pairs`` (extra) the number of (route, k) pairs.
+    """
+    fams = tuple(families)
+    if BASELINE in fams:
+        raise ValueError("families must not include 'baseline'")
+    recs = [r for r in _sorted_unique(records) if r.family == BASELINE or r.family in fams]
+    n_crashed = sum(r.status == "crashed" for r in recs)
+    agents: dict[str, Any] = {}
+    for agent in sorted({r.agent for r in recs}):
+        mine = [r for r in recs if r.agent == agent and r.status != "crashed"]
+        base_recs = [r for r in mine if r.family == BASELINE]
+        base = {(r.route_id, r.seed): r for r in base_recs if r.k == 0}
+        agents[agent] = {
+            "baseline": _absolute(base_recs),
+            "families": {
+                f: _family_block([r for r in mine if r.family == f], base,
+                                 n_boot=n_boot, boot_seed=boot_seed)
+                for f in fams
+            },
+        }
+    return {
+        "suite": str(suite),
+        "seed": int(seed),
+        "k": int(k),
+        "episodes": {"done": len(recs) - n_crashed, "crashed": n_crashed},
+        "agents": agents,
+        "families": list(fams),
+        "n_boot": int(n_boot),
+        "boot_seed": int(boot_seed),
+    }
+
+
+EPISODE_COLUMNS = ("agent", "route_id", "family", "k", "seed", "status", "ds", "rc", "is",
+                   "termination", "termination_class", "n_infractions", "infractions", "length",
+                   "duration", "attempts", "message")
+
+
+def episode_table(records: Iterable[EpisodeRecord]) -> list[dict]:
+    """One flat row per episode (columns :data:`EPISODE_COLUMNS`), sorted by
+    (agent, route_id, family, k, seed). ``infractions`` is ``kind:factor`` joined by ``;``."""
+    rows = []
+    for r in _sorted_unique(records):
+        rows.append({
+            "agent": r.agent, "route_id": r.route_id, "family": r.family, "k": r.k, "seed": r.seed,
+            "status": r.status, "ds": r.ds, "rc": r.rc, "is": r.is_, "termination": r.termination,
+            "termination_class": r.termination_class, "n_infractions": len(r.infractions),
+            "infractions": ";".join(f"{kind}:{factor:g}" for kind, factor in r.infractions),
+            "length": r.length, "duration": r.duration, "attempts": r.attempts,
+            "message": r.message.replace("\r", " ").replace("\n", " "),
+        })
+    return rows

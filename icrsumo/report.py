@@ -1,0 +1,428 @@
+"""Reports of an evaluation: ICR-Drive tables (Markdown, CSV, LaTeX), figures, Leaderboard 1.0
+checkpoint files. The only module that uses matplotlib (imported lazily, Agg, no pyplot)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import re
+import textwrap
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .aggregate import BASELINE, EPISODE_COLUMNS, episode_table
+from .fsio import dumps_json, write_atomic
+from .types import EpisodeLog, EpisodeRecord
+
+# --------------------------------------------------------------------------- tables
+_HEADER = ("Agent", "Family", "DS", "RC", "IS", "ΔDS [95% CI]", "ΔRC [95% CI]", "ΔIS", "worst ΔDS",
+           "RD %", "TO %")
+_CSV_HEADER = ("agent", "family", "n", "n_routes", "DS", "RC", "IS", "dDS", "dDS_ci95_lo", "dDS_ci95_hi",
+               "dRC", "dRC_ci95_lo", "dRC_ci95_hi", "dIS", "worst_dDS", "RD_pct", "TO_pct",
+               "baseline_done_variant_failed")
+
+
+def _rows(summary: dict) -> list[tuple[str, str, dict]]:
+    """(agent, family, block) for every table row: the baseline row first, then each family."""
+    out = []
+    for agent, a in summary["agents"].items():
+        out.append((agent, BASELINE, a["baseline"]))
+        for fam, block in a["families"].items():
+            out.append((agent, fam, block))
+    return out
+
+
+def _num(x: float | None, nd: int, sign: bool = False, none: str = "—") -> str:
+    if x is None:
+        return none
+    s = f"{x:+.{nd}f}" if sign else f"{x:.{nd}f}"
+    return s.lstrip("+-") if float(s) == 0.0 else s
+
+
+def _pct(x: float | None, none: str) -> str:
+    return none if x is None else f"{100.0 * x:.1f}"
+
+
+def _ci(ci: Sequence[float] | None, none: str) -> str:
+    return none if ci is None else f"[{ci[0]:.1f}, {ci[1]:.1f}]"
+
+
+def _cells(fam: str, b: dict, none: str) -> list[str]:
+    cells = [_num(b["DS"], 1, none=none), _num(b["RC"], 1, none=none), _num(b["IS"], 3, none=none)]
+    if fam == BASELINE:
+        cells += [none] * 4
+    else:
+        cells += [
+            f"{_num(b['dDS'], 1, True, none)} {_ci(b['dDS_ci95'], '')}".strip(),
+            f"{_num(b['dRC'], 1, True, none)} {_ci(b['dRC_ci95'], '')}".strip(),
+            _num(b["dIS"], 3, True, none),
+            _num(b["worst_dDS"], 1, True, none),
+        ]
+    return cells + [_pct(b["RD"], none), _pct(b["TO"], none)]
+
+
+_TEX_SPECIAL = {"\\": r"\textbackslash{}", "~": r"\textasciitilde{}", "^": r"\^{}",
+                **{c: "\\" + c for c in "&%$#_{}"}}
+
+
+def _tex_escape(s: str) -> str:
+    return "".join(_TEX_SPECIAL.get(c, c) for c in s)
+
+
+def _tex_num(cell: str) -> str:
+    """Numeric cell text to LaTeX: "-" as a math minus, "—" (no data) as "--"."""
+    return cell.replace("−", "-").replace("-", "$-$").replace("—", "--")
+
+
+def _csv_text(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    for row in rows:
+        w.writerow(["" if v is None else v for v in row])
+    return buf.getvalue()
+
+
+def tables(summary: dict) -> dict[str, str]:
+    """The ICR-Drive Table 1 layout as {"md", "csv", "tex"}: one row per (agent, family), the
+    baseline row first per agent. Markdown/LaTeX show DS, RC, deltas with 1 decimal, IS with 3,
+    RD/TO in % of the family's episodes; CSV has the unrounded summary numbers."""
+    rows = _rows(summary)
+
+    md = ["| " + " | ".join(_HEADER) + " |", "|" + "|".join(["---"] * 2 + ["---:"] * 9) + "|"]
+    for agent, fam, b in rows:
+        md.append("| " + " | ".join([agent, fam] + _cells(fam, b, "—")) + " |")
+
+    csv_rows = []
+    for agent, fam, b in rows:
+        base = fam == BASELINE
+        ci_ds = b.get("dDS_ci95") or [None, None]
+        ci_rc = b.get("dRC_ci95") or [None, None]
+        csv_rows.append([
+            agent, fam, b["n"], None if base else b["n_routes"], b["DS"], b["RC"], b["IS"],
+            b.get("dDS"), ci_ds[0], ci_ds[1], b.get("dRC"), ci_rc[0], ci_rc[1], b.get("dIS"),
+            b.get("worst_dDS"),
+            None if b["RD"] is None else round(100.0 * b["RD"], 2),
+            None if b["TO"] is None else round(100.0 * b["TO"], 2),
+            None if base else b["baseline_done_variant_failed"],
+        ])
+
+    tex_head = ["Agent", "Family", "DS", "RC", "IS", r"$\Delta$DS [95\% CI]", r"$\Delta$RC [95\% CI]",
+                r"$\Delta$IS", r"worst $\Delta$DS", r"RD \%", r"TO \%"]
+    tex = [r"\begin{tabular}{ll" + "r" * 9 + "}", r"\toprule", " & ".join(tex_head) + r" \\", r"\midrule"]
+    prev = None
+    for agent, fam, b in rows:
+        if prev is not None and agent != prev:
+            tex.append(r"\midrule")
+        cells = [_tex_escape(agent) if agent != prev else "", _tex_escape(fam)]
+        cells += [_tex_num(c) for c in _cells(fam, b, "—")]
+        tex.append(" & ".join(cells) + r" \\")
+        prev = agent
+    tex += [r"\bottomrule", r"\end{tabular}"]
+
+    return {"md": "\n".join(md) + "\n", "csv": _csv_text(_CSV_HEADER, csv_rows), "tex": "\n".join(tex) + "\n"}
+
+
+# --------------------------------------------------------------------------- figures
+def _figure(width: float, height: float):
+    import sys
+
+    import matplotlib
+
+    if "matplotlib.pyplot" not in sys.modules:  # never switch a backend someone else uses
+        matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(width, height), dpi=100)
+
+
+def _save(fig, path: Path) -> None:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", metadata={"Software": None})
+    write_atomic(Path(path), buf.getvalue())
+
+
+_FAMILY_MARKERS = {BASELINE: "o", "paraphrase": "s", "ambiguity": "^", "noise": "D", "misleading": "v"}
+
+
+def _agent_colours(agents: Sequence[str]) -> dict[str, Any]:
+    from matplotlib import colormaps
+
+    cmap = colormaps["tab10"]
+    return {a: cmap(i % 10) for i, a in enumerate(agents)}
+
+
+def rd_to_plane(summary: dict, path: Path) -> None:
+    """Scatter of the failure split: x = TO share, y = RD share (% of episodes), one point per
+    (agent, family), labelled; baseline points hollow."""
+    fig = _figure(6.5, 5.5)
+    ax = fig.add_subplot()
+    colours = _agent_colours(list(summary["agents"]))
+    top = 0.0
+    for agent, fam, b in _rows(summary):
+        if b["RD"] is None or b["TO"] is None:
+            continue
+        x, y = 100.0 * b["TO"], 100.0 * b["RD"]
+        top = max(top, x, y)
+        marker = _FAMILY_MARKERS.get(fam, "P")
+        c = colours[agent]
+        ax.scatter([x], [y], s=60, marker=marker, facecolors="none" if fam == BASELINE else [c],
+                   edgecolors=[c], linewidths=1.5, zorder=3)
+        ax.annotate(f"{agent}/{fam}", (x, y), xytext=(4, 4), textcoords="offset points", fontsize=7,
+                    color=c)
+    lim = max(10.0, min(100.0, top * 1.15 + 2.0))
+    ax.set_xlim(-1.0, lim)
+    ax.set_ylim(-1.0, lim)
+    ax.plot([0, 100], [0, 100], color="0.85", lw=0.8, zorder=1)
+    ax.set_xlabel("TO share (% of episodes: timeout, blocked, stuck)")
+    ax.set_ylabel("RD share (% of episodes: route deviation)")
+    ax.set_title(f"Failure split, suite {summary.get('suite', '')}")
+    ax.grid(True, color="0.92", zorder=0)
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def delta_bars(summary: dict, path: Path) -> None:
+    """Two panels (ΔDS, ΔRC): per family, one bar per agent with its 95 % bootstrap CI."""
+    agents = list(summary["agents"])
+    fams = list(summary.get("families") or next(iter(summary["agents"].values()), {}).get("families", {}))
+    colours = _agent_colours(agents)
+    fig = _figure(max(6.0, 1.6 * len(fams) + 2.0), 6.5)
+    axes = fig.subplots(2, 1, sharex=True)
+    width = 0.8 / max(1, len(agents))
+    x0 = np.arange(len(fams), dtype=float)
+    for ax, metric in zip(axes, ("DS", "RC")):
+        for i, agent in enumerate(agents):
+            vals, lo, hi = [], [], []
+            for fam in fams:
+                b = summary["agents"][agent]["families"].get(fam, {})
+                d, ci = b.get(f"d{metric}"), b.get(f"d{metric}_ci95")
+                vals.append(np.nan if d is None else d)
+                lo.append(0.0 if d is None or ci is None else max(0.0, d - ci[0]))
+                hi.append(0.0 if d is None or ci is None else max(0.0, ci[1] - d))
+            xs = x0 - 0.4 + width * (i + 0.5)
+            ax.bar(xs, vals, width=width * 0.95, color=colours[agent], label=agent,
+                   yerr=np.array([lo, hi]), capsize=3, error_kw={"elinewidth": 1.0})
+        ax.axhline(0.0, color="0.3", lw=0.8)
+        ax.set_axisbelow(True)
+        ax.set_ylabel(f"Δ{metric} vs baseline")
+        ax.grid(True, axis="y", color="0.92")
+    axes[0].set_title(f"Paired deltas with 95 % route-bootstrap CI, suite {summary.get('suite', '')}")
+    axes[1].set_xticks(x0)
+    axes[1].set_xticklabels(fams)
+    if agents:
+        axes[0].legend(fontsize=8, loc="best")
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def paired_rollout(net, baseline_log: EpisodeLog, variant_logs: list[tuple[str, EpisodeLog, str]],
+                   baseline_text: str, path: Path, title: str = "") -> None:
+    """The map's lanes around the trajectories (bounding box + 30 m), the baseline trajectory and
+    each counterfactual one (``(label, log, instruction text)``) with start (o) and end (x)
+    markers, and the instruction texts as captions under the map, coloured like their lines."""
+    from matplotlib import colormaps
+    from matplotlib.collections import LineCollection
+
+    trajs = [("baseline", baseline_log, baseline_text, "black")]
+    cmap = colormaps["tab10"]
+    for i, (label, log, text) in enumerate(variant_logs):
+        trajs.append((label, log, text, cmap(i % 10)))
+
+    pts = [np.column_stack([log.x, log.y]) for _, log, _, _ in trajs if len(log.x)]
+    if pts:
+        allp = np.concatenate(pts)
+        lo, hi = allp.min(axis=0) - 30.0, allp.max(axis=0) + 30.0
+    else:
+        shapes = list(net.lane_shape.values())
+        allp = np.concatenate(shapes) if shapes else np.zeros((1, 2))
+        lo, hi = allp.min(axis=0), allp.max(axis=0)
+
+    caption = [("baseline", baseline_text, "black")] + [(lab, txt, c) for lab, _, txt, c in trajs[1:]]
+    wrapped = [textwrap.wrap(f"{lab}: {txt}", 95) or [f"{lab}:"] for lab, txt, _ in caption]
+    n_lines = sum(len(w) for w in wrapped)
+    fig_w, map_w, map_h, line_h = 7.5, 6.6, 5.6, 0.2  # inches
+    cap_h = 0.2 + line_h * n_lines
+    total_h = cap_h + 0.65 + map_h + 0.45  # captions, x label, map, title
+    fig = _figure(fig_w, total_h)
+    ax = fig.add_axes([0.09, (cap_h + 0.65) / total_h, map_w / fig_w, map_h / total_h])
+    # widen the box's short side so that, at equal aspect, the map fills the axes
+    span = hi - lo
+    want = map_w / map_h
+    if span[0] / max(span[1], 1e-9) < want:
+        pad = (want * span[1] - span[0]) / 2.0
+        lo, hi = lo - [pad, 0.0], hi + [pad, 0.0]
+    else:
+        pad = (span[0] / want - span[1]) / 2.0
+        lo, hi = lo - [0.0, pad], hi + [0.0, pad]
+    lanes = []
+    for lid in sorted(net.lane_shape):
+        s = net.lane_shape[lid]
+        if len(s) < 2:
+            continue
+        smin, smax = s.min(axis=0), s.max(axis=0)
+        if np.all(smax >= lo) and np.all(smin <= hi):
+            lanes.append(s)
+
+    ax.add_collection(LineCollection(lanes, colors="0.75", linewidths=0.6, zorder=1))
+    for label, log, _, colour in trajs:
+        if not len(log.x):
+            continue
+        x, y = np.asarray(log.x), np.asarray(log.y)
+        ax.plot(x, y, color=colour, lw=1.8 if label == "baseline" else 1.4, label=label, zorder=3, alpha=0.9)
+        ax.plot(x[0], y[0], "o", color=colour, ms=6, zorder=4)
+        ax.plot(x[-1], y[-1], "X", color=colour, ms=7, zorder=4)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.legend(fontsize=7, loc="best")
+    if title:
+        ax.set_title(title)
+    yy = cap_h / total_h
+    for (_, _, colour), lines in zip(caption, wrapped):
+        for line in lines:
+            fig.text(0.03, yy, line, color=colour, fontsize=8, va="top", ha="left")
+            yy -= line_h / total_h
+    _save(fig, path)
+
+
+# --------------------------------------------------------------------------- leaderboard checkpoint
+#: Leaderboard 1.0 infraction keys, in the order of ``RouteRecord.infractions``.
+LB_INFRACTIONS = ("collisions_pedestrian", "collisions_vehicle", "collisions_layout", "red_light",
+                  "stop_infraction", "outside_route_lanes", "route_dev", "route_timeout", "vehicle_blocked")
+_LB_KIND = {
+    "collision_pedestrian": ("collisions_pedestrian", "Agent collided against a pedestrian"),
+    "collision_vehicle": ("collisions_vehicle", "Agent collided against a vehicle"),
+    "collision_static": ("collisions_layout", "Agent collided against the static layout"),
+    "red_light": ("red_light", "Agent ran a red light"),
+    "stop_sign": ("stop_infraction", "Agent ran a stop sign"),
+}
+_LB_TERMINATION = {  # termination -> (status, infraction key, message)
+    "completed": ("Completed", None, ""),
+    "route_deviation": ("Failed - Agent deviated from the route", "route_dev",
+                        "Agent deviated from the route"),
+    "route_timeout": ("Failed - Agent timed out", "route_timeout", "Route timeout."),
+    "agent_blocked": ("Failed - Agent got blocked", "vehicle_blocked", "Agent got blocked"),
+    "stuck": ("Failed - Agent got blocked", "vehicle_blocked", "Agent got stuck (SUMO teleported the ego)"),
+    "sim_error": ("Failed - Simulation crashed", None, ""),
+}
+_LB_LABELS = ["Avg. driving score", "Avg. route completion", "Avg. infraction penalty",
+              "Collisions with pedestrians", "Collisions with vehicles", "Collisions with layout",
+              "Red lights infractions", "Stop sign infractions", "Off-road infractions", "Route deviations",
+              "Route timeouts", "Agent blocked"]
+
+
+def _lb_record(r: EpisodeRecord, index: int) -> dict:
+    infr: dict[str, list[str]] = {k: [] for k in LB_INFRACTIONS}
+    if r.status == "crashed":
+        status = "Failed - Agent crashed" if "agent" in r.message.lower() else "Failed - Simulation crashed"
+    else:
+        status, key, msg = _LB_TERMINATION.get(r.termination, (f"Failed - {r.termination}", None, ""))
+        prod = 1.0
+        for kind, factor in r.infractions:
+            lb_key, text = _LB_KIND.get(kind, ("collisions_layout", f"Agent infraction {kind}"))
+            infr[lb_key].append(f"{text} (penalty {factor:.2f})")
+            prod *= factor
+        # IS = product of factors x (1 - outside %): recover the off-route share
+        if prod > 0 and r.is_ < prod * (1.0 - 1e-6):
+            pct = 100.0 * (1.0 - r.is_ / prod)
+            infr["outside_route_lanes"].append(
+                f"Agent went outside its route lanes for about {pct:.3f}% of the completed route")
+        if key is not None:
+            infr[key].append(msg)
+    return {
+        "route_id": f"RouteScenario_{r.route_id}_{r.family}_{r.k}",
+        "index": index,
+        "status": status,
+        "infractions": infr,
+        "scores": {"score_route": r.rc, "score_penalty": r.is_, "score_composed": r.ds},
+        "meta": {"route_length": r.length, "duration_game": r.duration, "duration_system": 0.0},
+    }
+
+
+def leaderboard_checkpoint(records: Iterable[EpisodeRecord], agent: str, family: str) -> dict:
+    """The episodes of one agent and family as a CARLA Leaderboard 1.0 checkpoint (``result.json``).
+
+    Records are sorted by (route_id, k, seed); crashed episodes appear as failed records and in
+    ``global_record.meta.exceptions`` (as every non-completed route does in the leaderboard) but
+    are left out of the global means and infraction rates, like every ICR-Drive mean. Global
+    infractions are counts per km over the total route length of the non-crashed episodes.
+    """
+    mine = sorted((r for r in records if r.agent == agent and r.family == family),
+                  key=lambda r: (r.route_id, r.k, r.seed))
+    recs = [_lb_record(r, i) for i, r in enumerate(mine)]
+    ok = [(r, rec) for r, rec in zip(mine, recs) if r.status != "crashed"]
+    km = max(sum(r.length for r, _ in ok) / 1000.0, 0.001)
+    n = len(ok)
+    infr = {k: round(sum(len(rec["infractions"][k]) for _, rec in ok) / km, 6) for k in LB_INFRACTIONS}
+    scores = {"score_route": 0.0, "score_penalty": 0.0, "score_composed": 0.0}
+    std: dict[str, Any] = {k: "NaN" for k in scores}
+    if n:
+        cols = {"score_route": [r.rc for r, _ in ok], "score_penalty": [r.is_ for r, _ in ok],
+                "score_composed": [r.ds for r, _ in ok]}
+        scores = {k: round(float(np.mean(v)), 6) for k, v in cols.items()}
+        if n > 1:
+            std = {k: round(float(np.std(v, ddof=1)), 6) for k, v in cols.items()}
+    exceptions = [[rec["route_id"], rec["index"], rec["status"]] for rec in recs
+                  if rec["status"] != "Completed"]
+    global_record = {
+        "route_id": -1,
+        "index": -1,
+        "status": "Failed" if exceptions else "Completed",
+        "infractions": infr,
+        "scores": scores,
+        "meta": {"exceptions": exceptions},
+        "scores_std_dev": std,
+    }
+    values = [f"{scores['score_composed']:.3f}", f"{scores['score_route']:.3f}",
+              f"{scores['score_penalty']:.3f}"] + [
+        f"{infr[k]:.3f}" for k in ("collisions_pedestrian", "collisions_vehicle", "collisions_layout",
+                                   "red_light", "stop_infraction", "outside_route_lanes", "route_dev",
+                                   "route_timeout", "vehicle_blocked")]
+    return {
+        "_checkpoint": {"global_record": global_record, "progress": [len(recs), len(recs)], "records": recs},
+        "entry_status": "Finished",
+        "eligible": True,
+        "sensors": [],
+        "values": values,
+        "labels": list(_LB_LABELS),
+    }
+
+
+# --------------------------------------------------------------------------- all of it
+def _file_name(s: str) -> str:
+    name = re.sub(r"[^A-Za-z0-9_.-]", "_", s)
+    return name if name not in ("", ".", "..") else f"x_{name}"
+
+
+def write_report(summary: dict, records: Sequence[EpisodeRecord], out_dir: Path,
+                 logs: Any = None, nets: Any = None) -> str:
+    """Write summary.json, results.{md,csv,tex}, episodes.csv, figures/rd_to.png,
+    figures/delta_bars.png and leaderboard/<agent>_<family>.json (baseline included) under
+    ``out_dir``; returns the Markdown table. ``logs`` and ``nets`` are accepted for the caller's
+    convenience and unused: paired rollout figures are written by the caller."""
+    del logs, nets
+    out = Path(out_dir)
+    write_atomic(out / "summary.json", dumps_json(summary))
+    t = tables(summary)
+    write_atomic(out / "results.md", t["md"])
+    write_atomic(out / "results.csv", t["csv"])
+    write_atomic(out / "results.tex", t["tex"])
+    rows = episode_table(records)
+    write_atomic(out / "episodes.csv", _csv_text(EPISODE_COLUMNS, ([row[c] for c in EPISODE_COLUMNS]
+                                                                    for row in rows)))
+    rd_to_plane(summary, out / "figures" / "rd_to.png")
+    delta_bars(summary, out / "figures" / "delta_bars.png")
+    fams = [BASELINE] + list(summary.get("families") or [])
+    for agent in summary["agents"]:
+        for fam in fams:
+            cp = leaderboard_checkpoint(records, agent, fam)
+            if cp["_checkpoint"]["records"]:
+                write_atomic(out / "leaderboard" / f"{_file_name(agent)}_{_file_name(fam)}.json",
+                             dumps_json(cp))
+    return t["md"]

@@ -1,0 +1,94 @@
+"""The results store of an evaluation: one SQLite file, one row per finished episode.
+
+Each episode is committed on its own (``synchronous=FULL``), so a run killed at any moment
+(even with SIGKILL) loses at most the episodes in flight; rerunning resumes from what is here.
+Only the evaluating process writes; workers return results to it.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import zlib
+from dataclasses import asdict, fields
+from pathlib import Path
+
+from .types import EpisodeRecord
+
+_COLUMNS = [f.name for f in fields(EpisodeRecord)]
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS episodes (
+    agent TEXT NOT NULL, route_id TEXT NOT NULL, family TEXT NOT NULL, k INTEGER NOT NULL,
+    seed INTEGER NOT NULL, status TEXT NOT NULL, ds REAL, rc REAL, is_ REAL, termination TEXT,
+    termination_class TEXT, infractions TEXT, length REAL, duration REAL, attempts INTEGER,
+    message TEXT, log BLOB,
+    PRIMARY KEY (agent, route_id, family, k, seed)
+);
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+"""
+
+
+class ResultStore:
+    """Episode records (and compressed episode logs) keyed by (agent, route, family, k, seed)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._db = sqlite3.connect(str(self.path))
+        self._db.execute("PRAGMA journal_mode=WAL")
+        self._db.execute("PRAGMA synchronous=FULL")
+        self._db.executescript(_SCHEMA)
+        self._db.commit()
+
+    def close(self) -> None:
+        self._db.close()
+
+    def __enter__(self) -> ResultStore:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ----------------------------------------------------------------- meta
+    def get_meta(self, key: str) -> str | None:
+        row = self._db.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
+        return None if row is None else row[0]
+
+    def set_meta(self, key: str, value: str) -> None:
+        self._db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES (?, ?)", (key, value))
+        self._db.commit()
+
+    # ----------------------------------------------------------------- episodes
+    def put(self, rec: EpisodeRecord, log_json: str | None = None) -> None:
+        """Store one finished episode and commit at once."""
+        row = asdict(rec)
+        row["infractions"] = json.dumps([list(i) for i in rec.infractions])
+        row["log"] = zlib.compress(log_json.encode("utf-8"), 6) if log_json else None
+        cols = _COLUMNS + ["log"]
+        self._db.execute(
+            f"INSERT OR REPLACE INTO episodes ({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})",
+            [row[c] for c in cols],
+        )
+        self._db.commit()
+
+    def keys(self) -> set[tuple[str, str, str, int, int]]:
+        """Keys of every stored episode (done or crashed)."""
+        return {tuple(r) for r in self._db.execute("SELECT agent, route_id, family, k, seed FROM episodes")}
+
+    def records(self) -> list[EpisodeRecord]:
+        """Every stored episode, sorted by key."""
+        rows = self._db.execute(
+            f"SELECT {', '.join(_COLUMNS)} FROM episodes ORDER BY agent, route_id, family, k, seed")
+        out = []
+        for r in rows:
+            d = dict(zip(_COLUMNS, r))
+            d["infractions"] = tuple((str(k), float(f)) for k, f in json.loads(d["infractions"] or "[]"))
+            out.append(EpisodeRecord(**d))
+        return out
+
+    def log(self, agent: str, route_id: str, family: str, k: int, seed: int) -> str | None:
+        """The stored episode log (JSON text) of one episode, if any."""
+        row = self._db.execute(
+            "SELECT log FROM episodes WHERE agent=? AND route_id=? AND family=? AND k=? AND seed=?",
+            (agent, route_id, family, k, seed)).fetchone()
+        return None if row is None or row[0] is None else zlib.decompress(row[0]).decode("utf-8")

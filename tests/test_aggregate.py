@@ -1,0 +1,185 @@
+"""ICR-Drive aggregation: hand-computed means and deltas, crashes, order independence, bootstrap."""
+
+from __future__ import annotations
+
+import random
+
+import numpy as np
+import pytest
+
+from icrsumo.aggregate import FAMILIES, bootstrap_ci, episode_table, summarize
+from icrsumo.fsio import dumps_json
+from icrsumo.types import EpisodeRecord
+
+TERM = {"done": "completed", "RD": "route_deviation", "TO": "route_timeout"}
+
+
+def rec(agent, route, family, k, ds=0.0, rc=0.0, is_=1.0, cls="done", status="done", seed=7, **kw):
+    if status == "crashed":
+        return EpisodeRecord(agent, route, family, k, seed, status="crashed", message="boom", attempts=2)
+    return EpisodeRecord(agent, route, family, k, seed, status=status, ds=ds, rc=rc, is_=is_,
+                         termination=TERM[cls], termination_class=cls, length=500.0, duration=60.0, **kw)
+
+
+def tiny() -> list[EpisodeRecord]:
+    """2 agents x 3 routes x K=2. A: baseline + paraphrase; B: baseline + misleading, with crashes."""
+    return [
+        rec("A", "r1", "baseline", 0, 80, 100, 0.8),
+        rec("A", "r2", "baseline", 0, 60, 60, 1.0, "TO"),
+        rec("A", "r3", "baseline", 0, 50, 100, 0.5),
+        rec("A", "r1", "paraphrase", 0, 70, 100, 0.7),
+        rec("A", "r1", "paraphrase", 1, 40, 50, 0.8, "RD"),
+        rec("A", "r2", "paraphrase", 0, 60, 60, 1.0, "TO"),
+        rec("A", "r2", "paraphrase", 1, 30, 30, 1.0, "TO"),
+        rec("A", "r3", "paraphrase", 0, 50, 100, 0.5),
+        rec("A", "r3", "paraphrase", 1, 50, 100, 0.5),
+        rec("B", "r1", "baseline", 0, 100, 100, 1.0),
+        rec("B", "r2", "baseline", 0, status="crashed"),
+        rec("B", "r3", "baseline", 0, 90, 100, 0.9),
+        rec("B", "r1", "misleading", 0, 20, 20, 1.0, "RD"),
+        rec("B", "r1", "misleading", 1, status="crashed"),
+        rec("B", "r2", "misleading", 0, 10, 10, 1.0, "RD"),
+        rec("B", "r2", "misleading", 1, 50, 50, 1.0, "TO"),
+        rec("B", "r3", "misleading", 0, 90, 100, 0.9),
+        rec("B", "r3", "misleading", 1, 45, 50, 0.9, "RD"),
+    ]
+
+
+FAMS = ("paraphrase", "misleading")
+
+
+def test_hand_computed_tiny_example():
+    s = summarize(tiny(), suite="tiny", seed=7, k=2, families=FAMS, n_boot=500)
+    assert s["suite"] == "tiny" and s["seed"] == 7 and s["k"] == 2
+    assert s["episodes"] == {"done": 16, "crashed": 2}
+    assert list(s["agents"]) == ["A", "B"]
+    assert list(s["agents"]["A"]["families"]) == ["paraphrase", "misleading"]
+
+    a_base = s["agents"]["A"]["baseline"]
+    assert a_base == {"DS": 63.3333, "RC": 86.6667, "IS": 0.766667, "RD": 0.0, "TO": 0.3333, "n": 3}
+    p = s["agents"]["A"]["families"]["paraphrase"]
+    assert (p["DS"], p["RC"], p["IS"]) == (50.0, 73.3333, 0.75)
+    assert (p["dDS"], p["dRC"], p["dIS"]) == (-13.3333, -13.3333, -0.016667)
+    assert p["worst_dDS"] == -23.3333  # mean(-40, -30, 0)
+    assert (p["RD"], p["TO"], p["n"], p["n_routes"]) == (0.1667, 0.3333, 6, 3)
+    assert p["baseline_done_variant_failed"] == 1  # r1 only: r2's baseline timed out
+
+    # B: baseline r2 and misleading r1/k1 crashed -> out of every mean; r2's variants unpaired
+    b_base = s["agents"]["B"]["baseline"]
+    assert (b_base["DS"], b_base["RC"], b_base["IS"], b_base["n"]) == (95.0, 100.0, 0.95, 2)
+    m = s["agents"]["B"]["families"]["misleading"]
+    assert (m["DS"], m["RC"], m["IS"], m["n"]) == (43.0, 46.0, 0.96, 5)
+    assert (m["dDS"], m["dRC"], m["dIS"]) == (-41.6667, -43.3333, 0.0)
+    assert m["worst_dDS"] == -62.5  # mean(-80, -45)
+    assert (m["RD"], m["TO"], m["n_routes"]) == (0.6, 0.2, 2)
+    assert m["baseline_done_variant_failed"] == 2
+
+    # a family without episodes: None, never NaN
+    empty = s["agents"]["A"]["families"]["misleading"]
+    assert empty["n"] == 0 and empty["DS"] is None and empty["dDS"] is None and empty["dDS_ci95"] is None
+    assert empty["RD"] is None and empty["baseline_done_variant_failed"] == 0
+    text = dumps_json(s)  # allow_nan=False: raises on NaN
+    assert "NaN" not in text
+
+
+def test_schema_keys():
+    s = summarize(tiny(), suite="tiny", seed=7, k=2, families=FAMS, n_boot=100)
+    assert {"suite", "seed", "k", "episodes", "agents"} <= set(s)
+    assert set(s["episodes"]) == {"done", "crashed"}
+    for a in s["agents"].values():
+        assert set(a) == {"baseline", "families"}
+        assert set(a["baseline"]) == {"DS", "RC", "IS", "RD", "TO", "n"}
+        for f in a["families"].values():
+            assert {"DS", "RC", "IS", "dDS", "dRC", "dIS", "worst_dDS", "dDS_ci95", "dRC_ci95", "RD", "TO",
+                    "n", "n_routes", "baseline_done_variant_failed"} <= set(f)
+    ci = s["agents"]["A"]["families"]["paraphrase"]["dDS_ci95"]
+    assert isinstance(ci, list) and len(ci) == 2 and all(isinstance(v, float) for v in ci)
+    assert isinstance(s["agents"]["A"]["baseline"]["n"], int)
+    default = summarize([], suite="x", seed=1, k=8)
+    assert default["agents"] == {} and default["episodes"] == {"done": 0, "crashed": 0}
+    assert tuple(default["families"]) == FAMILIES
+
+
+def test_order_independence_byte_identical():
+    recs = tiny()
+    ref = dumps_json(summarize(recs, suite="tiny", seed=7, k=2, families=FAMS))
+    rnd = random.Random(3)
+    for _ in range(3):
+        shuffled = recs[:]
+        rnd.shuffle(shuffled)
+        assert dumps_json(summarize(shuffled, suite="tiny", seed=7, k=2, families=FAMS)) == ref
+    assert episode_table(list(reversed(recs))) == episode_table(recs)
+
+
+def test_duplicates_and_foreign_families():
+    recs = tiny()
+    with pytest.raises(ValueError, match="duplicate"):
+        summarize(recs + [recs[0]], suite="t", seed=7, k=2, families=FAMS)
+    # records of families not asked for are ignored (and not counted)
+    s = summarize(recs, suite="t", seed=7, k=2, families=("paraphrase",))
+    assert s["episodes"] == {"done": 11, "crashed": 1}
+    assert list(s["agents"]["B"]["families"]) == ["paraphrase"]
+
+
+def _generated(n_routes: int, deltas, seed: int = 0) -> list[EpisodeRecord]:
+    """Baseline DS/RC drawn per route; variant k of each route = baseline + deltas(route, k)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n_routes):
+        route = f"route_{i:03d}"
+        b_ds, b_rc = float(rng.uniform(40, 90)), float(rng.uniform(60, 100))
+        out.append(rec("A", route, "baseline", 0, b_ds, b_rc, 0.9))
+        for k in range(3):
+            d = float(deltas(rng, i, k))
+            out.append(rec("A", route, "noise", k, b_ds + d, b_rc + d / 2, 0.9))
+    return out
+
+
+def test_bootstrap_constant_delta_gives_zero_width():
+    for n in (3, 20):
+        s = summarize(_generated(n, lambda rng, i, k: -12.5), suite="g", seed=7, k=3, families=("noise",))
+        f = s["agents"]["A"]["families"]["noise"]
+        assert f["dDS"] == -12.5 and f["worst_dDS"] == -12.5
+        assert f["dDS_ci95"] == [-12.5, -12.5] and f["dRC_ci95"] == [-6.25, -6.25]
+
+
+def test_bootstrap_contains_estimate_deterministic_and_shrinks():
+    def noisy(rng, i, k):
+        return -10.0 + rng.normal(0.0, 15.0)
+
+    widths = []
+    for n in (5, 80):
+        recs = _generated(n, noisy, seed=11)
+        s1 = summarize(recs, suite="g", seed=7, k=3, families=("noise",))
+        s2 = summarize(recs, suite="g", seed=7, k=3, families=("noise",))
+        assert dumps_json(s1) == dumps_json(s2)
+        f = s1["agents"]["A"]["families"]["noise"]
+        for key, ci in (("dDS", f["dDS_ci95"]), ("dRC", f["dRC_ci95"])):
+            assert ci[0] <= f[key] <= ci[1]
+        widths.append(f["dDS_ci95"][1] - f["dDS_ci95"][0])
+        other = summarize(recs, suite="g", seed=7, k=3, families=("noise",), boot_seed=99)
+        assert other["agents"]["A"]["families"]["noise"]["dDS_ci95"] != f["dDS_ci95"]
+    assert widths[1] < widths[0] / 2
+
+
+def test_bootstrap_ci_function():
+    assert bootstrap_ci(np.zeros(0), n_boot=10, seed=1) is None
+    vals = np.arange(10.0)
+    ci = bootstrap_ci(vals, n_boot=4000, seed=5)
+    assert ci.shape == (2,) and ci[0] < 4.5 < ci[1]
+    two = bootstrap_ci(np.column_stack([vals, 2 * vals]), n_boot=4000, seed=5)
+    assert two.shape == (2, 2) and np.allclose(two[:, 1], 2 * two[:, 0])
+
+
+def test_episode_table_rows():
+    rows = episode_table(tiny())
+    assert len(rows) == 18
+    keys = [(r["agent"], r["route_id"], r["family"], r["k"], r["seed"]) for r in rows]
+    assert keys == sorted(keys)
+    crashed = [r for r in rows if r["status"] == "crashed"]
+    assert len(crashed) == 2 and crashed[0]["message"] == "boom"
+    r = rec("A", "r9", "noise", 1, 30, 50, 0.42, "RD",
+            infractions=(("collision_vehicle", 0.6), ("red_light", 0.7)))
+    row = episode_table([r])[0]
+    assert row["infractions"] == "collision_vehicle:0.6;red_light:0.7" and row["n_infractions"] == 2
+    assert row["is"] == 0.42 and row["termination"] == "route_deviation"

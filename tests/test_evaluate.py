@@ -1,0 +1,154 @@
+"""icrsumo evaluate: paired protocol, store, resume after SIGKILL, backends, bad input."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from icrsumo.cli import main
+from icrsumo.evaluate import EvalOptions, evaluate
+from icrsumo.store import ResultStore
+
+AGENTS = Path(__file__).parent / "data" / "agents" / "user_agents.py"
+ROUTES = ("tiny_003", "tiny_012")
+
+
+def _opts(out, **kw):
+    base = dict(out=out, suite="tiny", agents=("route-oracle", "instruction-follower"),
+                families=("misleading", "noise"), k=2, routes=ROUTES, workers=1, quiet=True)
+    base.update(kw)
+    return EvalOptions(**base)
+
+
+def _records(out):
+    with ResultStore(out / "results.sqlite") as s:
+        return [(r.agent, r.route_id, r.family, r.k, r.status, r.ds, r.rc, r.is_, r.termination)
+                for r in s.records()]
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ref")
+    summary = evaluate(_opts(out))
+    return out, summary
+
+
+def test_reference_run_writes_everything(reference):
+    out, summary = reference
+    assert summary["episodes"] == {"done": 2 * 2 * 5, "crashed": 0}
+    for name in ("summary.json", "results.md", "results.csv", "results.tex", "episodes.csv",
+                 "figures/rd_to.png", "figures/delta_bars.png"):
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    assert list((out / "figures").glob("rollout_*.png"))
+    assert list((out / "leaderboard").glob("*.json"))
+    s = json.loads((out / "summary.json").read_text())
+    fam = s["agents"]["instruction-follower"]["families"]["misleading"]
+    assert set(fam) >= {"DS", "RC", "IS", "dDS", "dRC", "dIS", "worst_dDS", "dDS_ci95", "dRC_ci95",
+                        "RD", "TO"}
+    assert fam["dRC"] < 0 and s["agents"]["route-oracle"]["families"]["misleading"]["dDS"] == 0
+
+
+def test_workers_and_rerun_give_identical_results(reference, tmp_path):
+    ref_out, _ = reference
+    evaluate(_opts(tmp_path, workers=2))
+    assert (tmp_path / "summary.json").read_bytes() == (ref_out / "summary.json").read_bytes()
+    assert _records(tmp_path) == _records(ref_out)
+    # a rerun resumes: nothing left to do, same outputs
+    before = (tmp_path / "results.sqlite").stat().st_size
+    evaluate(_opts(tmp_path, workers=2))
+    assert (tmp_path / "summary.json").read_bytes() == (ref_out / "summary.json").read_bytes()
+    assert (tmp_path / "results.sqlite").stat().st_size >= before
+
+
+def test_report_rebuilds_without_simulating(reference, tmp_path, capsys):
+    ref_out, _ = reference
+    summary = (ref_out / "summary.json").read_bytes()
+    (ref_out / "summary.json").unlink()
+    assert main(["report", str(ref_out), "--quiet"]) == 0
+    assert (ref_out / "summary.json").read_bytes() == summary
+
+
+def test_ray_backend_gives_identical_results(reference, tmp_path):
+    pytest.importorskip("ray")
+    ref_out, _ = reference
+    evaluate(_opts(tmp_path, backend="ray", workers=2))
+    assert _records(tmp_path) == _records(ref_out)
+    assert (tmp_path / "summary.json").read_bytes() == (ref_out / "summary.json").read_bytes()
+
+
+def test_sigkill_then_resume(reference, tmp_path):
+    ref_out, _ = reference
+    out = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "icrsumo", "evaluate", "--suite", "tiny", "--agent", "route-oracle",
+           "--agent", "instruction-follower", "--family", "misleading", "--family", "noise", "--k", "2",
+           "--routes", ",".join(ROUTES), "--workers", "2", "--out", str(out), "--quiet"]
+    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    db = out / "results.sqlite"
+    deadline = time.time() + 240
+    n = 0
+    while time.time() < deadline and proc.poll() is None:
+        if db.is_file():
+            try:
+                with sqlite3.connect(db) as c:
+                    n = c.execute("SELECT COUNT(*) FROM episodes").fetchone()[0]
+            except sqlite3.Error:
+                n = 0
+            if n >= 5:
+                break
+        time.sleep(0.2)
+    assert proc.poll() is None, proc.stderr.read().decode()[-2000:]
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=30)
+    with sqlite3.connect(db) as c:
+        killed_at = c.execute("SELECT COUNT(*) FROM episodes").fetchone()[0]
+    assert 5 <= killed_at < 20
+    assert main(cmd[3:]) == 0
+    with sqlite3.connect(db) as c:
+        keys = c.execute("SELECT agent, route_id, family, k, seed FROM episodes").fetchall()
+    assert len(keys) == len(set(keys)) == 20
+    assert _records(out) == _records(ref_out)
+    assert (out / "summary.json").read_bytes() == (ref_out / "summary.json").read_bytes()
+
+
+def test_crashing_agent_is_retried_then_stored(tmp_path, capsys):
+    spec = f"{AGENTS}:Raises"
+    summary = evaluate(_opts(tmp_path, agents=(spec, f"{AGENTS}:Cruise"), routes=("tiny_003",),
+                             families=("misleading",), k=1))
+    assert summary["episodes"] == {"done": 2, "crashed": 2}
+    with ResultStore(tmp_path / "results.sqlite") as s:
+        crashed = [r for r in s.records() if r.status == "crashed"]
+    assert {r.agent for r in crashed} == {"raises"}
+    assert all(r.attempts == 2 and "agent exploded" in r.message for r in crashed)
+
+
+@pytest.mark.parametrize("argv, expect", [
+    (["--agent", "no-such-agent"], "not a built-in agent"),
+    (["--agent", f"{AGENTS}:NoAct"], "does not implement the agent protocol (missing act)"),
+    (["--agent", "no_such_module_xyz:Agent"], "cannot import no_such_module_xyz"),
+    (["--family", "sarcasm"], "unknown family"),
+    (["--suite", "huge"], "unknown suite"),
+    (["--backend", "slurm"], "unknown backend"),
+])
+def test_bad_input_is_one_line_and_touches_nothing(tmp_path, capsys, argv, expect):
+    out = tmp_path / "o"
+    code = main(["evaluate", "--out", str(out), "--quiet", *argv])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and expect in err[0] and "Traceback" not in err[0]
+    assert not out.exists()
+
+
+def test_other_configuration_is_refused(reference, capsys):
+    ref_out, _ = reference
+    before = {p: p.read_bytes() for p in ref_out.rglob("*") if p.is_file()}
+    code = main(["evaluate", "--out", str(ref_out), "--seed", "7", "--routes", ",".join(ROUTES), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and "different configuration" in err and "seed=2026" in err
+    assert {p: p.read_bytes() for p in ref_out.rglob("*") if p.is_file()} == before
