@@ -31,8 +31,8 @@ from typing import Any
 
 from ..fsio import dumps_json, write_atomic
 from ..types import Instruction, InstructionSet, Intent
-
-FAMILIES = ("paraphrase", "ambiguity", "noise", "misleading")
+from .banks import CONTRADICTS
+from .families import FAMILIES
 
 PLACEHOLDER = "[x]"
 MAX_TEXT = 300                  # a variant text must be shorter than this (characters)
@@ -40,15 +40,6 @@ MAX_RESPONSE_BYTES = 8 << 20    # larger HTTP bodies are rejected
 RETRY_BACKOFF = 0.5             # s slept before retrying after a transport failure (times attempt)
 CACHE_FORMAT = "icrsumo-llm-cache/1"
 
-# What a misleading variant of a baseline intent must classify as.
-CONTRADICTS: dict[Intent, frozenset[Intent]] = {
-    Intent.LEFT: frozenset({Intent.RIGHT}),
-    Intent.RIGHT: frozenset({Intent.LEFT}),
-    Intent.STRAIGHT: frozenset({Intent.LEFT, Intent.RIGHT}),
-    Intent.FOLLOW: frozenset({Intent.LEFT, Intent.RIGHT}),
-    Intent.LANE_LEFT: frozenset({Intent.LANE_RIGHT}),
-    Intent.LANE_RIGHT: frozenset({Intent.LANE_LEFT}),
-}
 _UNCHECKED = (Intent.STOP, Intent.UNKNOWN)   # baseline intents without an intent check
 
 
