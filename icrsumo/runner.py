@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .agents.base import Action, Agent, EpisodeInfo, Observation, World
+from .agents.base import Action, Agent, EpisodeInfo, Observation, World, validate_action
 from .control import WaypointController
 from .dynamics import Control, EgoState, VehicleParams, step
 from .networks import RoadNet, load_net
@@ -316,7 +316,7 @@ def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
                                       instruction=texts[k_instr] if k_instr >= 0 else "",
                                       instruction_id=instr[k_instr].id if k_instr >= 0 else -1,
                                       notice=notice, world=world)
-                    action = agent.act(obs)
+                    action = validate_action(agent.act(obs))
                     if video is not None:
                         video.add(bev, obs.instruction, notice, state.speed)
                 control = action.control if action.control is not None else controller.control(

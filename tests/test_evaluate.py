@@ -152,3 +152,13 @@ def test_other_configuration_is_refused(reference, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "different configuration" in err and "seed=2026" in err
     assert {p: p.read_bytes() for p in ref_out.rglob("*") if p.is_file()} == before
+
+
+def test_broken_actions_are_crashes_with_reasons(tmp_path):
+    summary = evaluate(_opts(tmp_path, agents=(f"{AGENTS}:NaNs", f"{AGENTS}:WrongShape"),
+                             routes=("tiny_003",), families=("noise",), k=1))
+    assert summary["episodes"] == {"done": 0, "crashed": 4}
+    with ResultStore(tmp_path / "results.sqlite") as s:
+        msgs = {r.agent: r.message for r in s.records()}
+    assert "waypoints contain NaN" in msgs["nans"]
+    assert "waypoints must have shape (N, 2)" in msgs["wrong-shape"] and "(3,)" in msgs["wrong-shape"]

@@ -93,3 +93,31 @@ class Agent(Protocol):
     def reset(self, info: EpisodeInfo) -> None: ...
 
     def act(self, obs: Observation) -> Action: ...
+
+
+class AgentError(RuntimeError):
+    """An agent broke the protocol (wrong action type or shape, NaN, ...)."""
+
+
+def validate_action(action: object) -> Action:
+    """Check an agent's output; raise :class:`AgentError` saying what is wrong in plain words."""
+    if not isinstance(action, Action):
+        raise AgentError(f"act() returned {type(action).__name__}, expected icrsumo.agents.base.Action")
+    if action.control is None and action.waypoints is None:
+        raise AgentError("act() returned an Action with neither control nor waypoints")
+    if action.control is not None:
+        c = action.control
+        values = (c.steer, c.throttle, c.brake)
+        if not all(isinstance(v, (int, float, np.floating, np.integer)) and np.isfinite(v) for v in values):
+            raise AgentError(f"control values must be finite numbers, got steer={c.steer!r}, "
+                             f"throttle={c.throttle!r}, brake={c.brake!r}")
+        return action
+    wps = np.asarray(action.waypoints)
+    if wps.ndim != 2 or wps.shape[1] != 2 or wps.shape[0] < 1:
+        raise AgentError(f"waypoints must have shape (N, 2) with N >= 1, got {wps.shape}")
+    if not np.issubdtype(wps.dtype, np.number) or not np.all(np.isfinite(wps)):
+        raise AgentError("waypoints contain NaN, inf or non-numbers")
+    ts = action.target_speed
+    if ts is not None and not (isinstance(ts, (int, float, np.floating, np.integer)) and np.isfinite(ts)):
+        raise AgentError(f"target_speed must be a finite number or None, got {ts!r}")
+    return action

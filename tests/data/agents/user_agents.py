@@ -41,3 +41,21 @@ class NoAct:
 
     def reset(self, info: EpisodeInfo) -> None:
         pass
+
+
+class NaNs(Cruise):
+    """Returns NaN waypoints."""
+
+    name = "nans"
+
+    def act(self, obs: Observation) -> Action:
+        return Action(waypoints=np.array([[np.nan, 0.0], [5.0, 0.0]]))
+
+
+class WrongShape(Cruise):
+    """Returns a flat waypoint vector."""
+
+    name = "wrong-shape"
+
+    def act(self, obs: Observation) -> Action:
+        return Action(waypoints=np.array([2.5, 5.0, 7.5]))
