@@ -17,6 +17,7 @@ how they choose the next edge at a junction:
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -61,7 +62,7 @@ def _lane_index(lane: str) -> int:
     return int(lane.rsplit("_", 1)[1])
 
 
-class PathDriver:
+class PathDriver(ABC):
     """Shared driving logic; subclasses implement :meth:`choose`."""
 
     name = "path-driver"
@@ -95,12 +96,12 @@ class PathDriver:
         return Action(waypoints=self._waypoints(w, path), target_speed=v)
 
     # ----------------------------------------------------------------- hooks
-    def observe(self, obs: Observation) -> None:
-        """Read the instruction (subclasses)."""
+    def observe(self, obs: Observation) -> None:  # noqa: B027 (optional hook)
+        """Read the instruction (subclasses that listen to it)."""
 
+    @abstractmethod
     def choose(self, w: World, edge: str, options: list[str], tentative: bool) -> str | None:
         """The next edge after ``edge`` among ``options`` (None: stop at the edge's end)."""
-        raise NotImplementedError
 
     def preferred_lane(self, w: World, edge: str, lanes: tuple[int, ...], current: int) -> int:
         """Lane index to drive on ``edge`` when the next edge allows several."""
@@ -334,14 +335,11 @@ class RouteOracle(PathDriver):
 
     def choose(self, w: World, edge: str, options: list[str], tentative: bool) -> str | None:
         edges = w.route.edges if w.route is not None else ()
-        # the route occurrence of this edge nearest to the current progress
+        # the edge's first occurrence on the route (the bundled routes never revisit an edge)
         for i, e in enumerate(edges[:-1]):
             if e == edge:
                 return edges[i + 1]
         return None
-
-    def preferred_lane(self, w: World, edge: str, lanes: tuple[int, ...], current: int) -> int:
-        return super().preferred_lane(w, edge, lanes, current)
 
 
 class InstructionFollower(PathDriver):
