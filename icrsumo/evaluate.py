@@ -239,21 +239,18 @@ def _check_config(out: Path, opts: EvalOptions) -> dict:
 
 def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path) -> list[Job]:
     """Every episode of the protocol, in a fixed order (agent, route, family, k)."""
-    dirs = find_scenarios(scenarios)
+    scs = [(d, read_scenario(d)) for d in find_scenarios(scenarios)]
     if opts.routes:
-        wanted = set(opts.routes)
-        dirs = [d for d in dirs if read_scenario(d).route_id in wanted]
-        found = {read_scenario(d).route_id for d in dirs}
-        missing = sorted(wanted - found)
+        missing = sorted(set(opts.routes) - {sc.route_id for _, sc in scs})
         if missing:
             raise InputError("--routes", missing[0], "no such route in the suite", "check the route ids")
+        scs = [(d, sc) for d, sc in scs if sc.route_id in set(opts.routes)]
+    sets = [("baseline", 0)] + [(f, k) for f in opts.families for k in range(opts.k)]
     jobs = []
     for spec in opts.agents:
         name = agent_name(spec, agent_factory(spec))
-        for d in dirs:
-            sc = read_scenario(d)
+        for d, sc in scs:
             instr = str(instr_dir / f"{safe_name(sc.route_id)}.json")
-            sets = [("baseline", 0)] + [(f, k) for f in opts.families for k in range(opts.k)]
             for fam, k in sets:
                 jobs.append(Job(spec, name, sc.route_id, fam, k, opts.seed, str(d), instr))
     return jobs

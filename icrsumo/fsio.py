@@ -22,6 +22,24 @@ def dumps_json(obj: Any) -> str:
     return text + "\n"
 
 
+def read_json_doc(path: Path, fmt: str, what: str, fix: str) -> dict:
+    """A JSON document whose ``format`` key must be ``fmt``; problems are InputErrors naming
+    the file (``what`` names the document, ``fix`` the command that writes it)."""
+    from .errors import InputError
+
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(path, "", f"{what} not found", fix) from None
+    except json.JSONDecodeError as err:
+        raise InputError(path, f"line {err.lineno}", "malformed JSON", fix) from None
+    if not isinstance(doc, dict) or doc.get("format") != fmt:
+        found = doc.get("format") if isinstance(doc, dict) else None
+        raise InputError(path, "format", f"unsupported format {found!r} (expects {fmt})", fix)
+    return doc
+
+
 def write_atomic(path: Path, data: str | bytes) -> None:
     """Write ``data`` to ``path`` via a temporary file in the same folder and ``os.replace``."""
     path = Path(path)

@@ -6,7 +6,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import InputError
+from .fsio import read_json_doc
 
 SCENARIO_FORMAT = "icrsumo-scenario/1"
 MANIFEST = "scenario.json"
@@ -43,17 +43,7 @@ def read_scenario(path: Path) -> Scenario:
     """Load a scenario from its folder or its ``scenario.json``."""
     path = Path(path)
     mpath = path / MANIFEST if path.is_dir() else path
-    try:
-        m = json.loads(mpath.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(mpath, "", "scenario manifest not found", "run icrsumo convert-routes") from None
-    except json.JSONDecodeError as err:
-        raise InputError(mpath, f"line {err.lineno}", "malformed JSON", "re-run convert-routes") from None
-    if m.get("format") != SCENARIO_FORMAT:
-        raise InputError(
-            mpath, "format", f"unsupported scenario format {m.get('format')!r}",
-            f"re-run icrsumo convert-routes (expects {SCENARIO_FORMAT})",
-        )
+    m = read_json_doc(mpath, SCENARIO_FORMAT, "scenario manifest", "run icrsumo convert-routes")
     base = mpath.parent
     ego, st = m["ego"], m["ego"]["start"]
     return Scenario(

@@ -171,6 +171,17 @@ def _fills(slots: set[str]) -> list[dict[str, str]]:
     return [{}]
 
 
+def _entry(path: Path, place: str, e: object, seen: set[str]) -> Entry:
+    """One ``{"id", "text"}`` bank entry, its id not in ``seen`` (which it joins)."""
+    if not isinstance(e, dict) or not isinstance(e.get("id"), str):
+        raise InputError(path, place, "entry must be {\"id\": str, \"text\": str}", "fix it")
+    text = _check_text(path, place, e.get("text"))
+    if e["id"] in seen:
+        raise InputError(path, place, f"duplicate id {e['id']!r}", "give every entry its own id")
+    seen.add(e["id"])
+    return Entry(e["id"], text)
+
+
 def _load_intent_bank(folder: Path, family: str) -> dict[Intent, dict[str, tuple[Entry, ...]]]:
     path = folder / f"{family}.json"
     data = _load(path, family)
@@ -194,12 +205,8 @@ def _load_intent_bank(folder: Path, family: str) -> dict[Intent, dict[str, tuple
             parsed = []
             for i, e in enumerate(entries):
                 place = f"{place0}[{i}]"
-                if not isinstance(e, dict) or not isinstance(e.get("id"), str):
-                    raise InputError(path, place, "entry must be {\"id\": str, \"text\": str}", "fix it")
-                text = _check_text(path, place, e.get("text"))
-                if e["id"] in seen:
-                    raise InputError(path, place, f"duplicate id {e['id']!r}", "give every entry its own id")
-                seen.add(e["id"])
+                entry = _entry(path, place, e, seen)
+                text = entry.text
                 if text.count("[x]") != (1 if form == "distance" else 0):
                     raise InputError(path, place, f"{form} entries need [x] "
                                      f"{'exactly once' if form == 'distance' else 'zero times'}",
@@ -216,7 +223,7 @@ def _load_intent_bank(folder: Path, family: str) -> dict[Intent, dict[str, tuple
                     expected = " or ".join(sorted(w.value for w in want))
                     raise InputError(path, place, f"{text!r} classifies as {got.value}, not {expected}",
                                      "rephrase it so that the classifier recovers the intended direction")
-                parsed.append(Entry(e["id"], text))
+                parsed.append(entry)
             out[tau][form] = tuple(parsed)
     return out
 
@@ -230,19 +237,15 @@ def _load_ambiguity(folder: Path) -> tuple[Entry, ...]:
     out, seen = [], set()
     for i, e in enumerate(entries):
         place = f"entries[{i}]"
-        if not isinstance(e, dict) or not isinstance(e.get("id"), str):
-            raise InputError(path, place, "entry must be {\"id\": str, \"text\": str}", "fix it")
-        text = _check_text(path, place, e.get("text"))
-        if e["id"] in seen:
-            raise InputError(path, place, f"duplicate id {e['id']!r}", "give every entry its own id")
-        seen.add(e["id"])
+        entry = _entry(path, place, e, seen)
+        text = entry.text
         if "[x]" in text or _SLOT.search(text):
             raise InputError(path, place, "ambiguity entries carry no placeholders", "remove them")
         got = classify_intent(text)
         if got != Intent.UNKNOWN:
             raise InputError(path, place, f"{text!r} still carries a direction ({got.value})",
                              "remove direction words so that no maneuver can be recovered")
-        out.append(Entry(e["id"], text))
+        out.append(entry)
     return tuple(out)
 
 

@@ -3,11 +3,10 @@ sequence and every variant sequence. See the README for the format."""
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict
 from pathlib import Path
 
-from ..errors import InputError
+from ..fsio import read_json_doc
 from ..types import Instruction, InstructionSet, Intent, Maneuver, Notice
 from .intent import classify_intent
 
@@ -50,15 +49,7 @@ def _instruction(d: dict) -> Instruction:
 
 def read_instruction_sets(path: Path) -> list[InstructionSet]:
     """All sequences of a route file: the baseline first, then variants in file order."""
-    path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(path, "", "instruction file not found", "run icrsumo generate") from None
-    except json.JSONDecodeError as err:
-        raise InputError(path, f"line {err.lineno}", "malformed JSON", "re-run icrsumo generate") from None
-    if doc.get("format") != FORMAT:
-        raise InputError(path, "format", f"expected {FORMAT}", "re-run icrsumo generate")
+    doc = read_json_doc(path, FORMAT, "instruction file", "run icrsumo generate")
     notices = tuple(
         Notice(id=int(n["id"]), trigger=float(n["trigger"]), end=float(n["end"]), text=n["text"],
                type=n["type"], intent=Intent(n["intent"]))
