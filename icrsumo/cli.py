@@ -103,6 +103,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         families=_split_list(args.family) or FAMILIES, k=args.k, seed=args.seed,
         routes=_split_list(args.routes) or None, workers=args.workers, backend=args.backend,
         address=args.address, traffic=args.traffic, quiet=args.quiet, rollout_route=args.rollout_route,
+        agent_timeout=args.agent_timeout or None,
     )
     t0 = time.perf_counter()
     summary = evaluate(opts)
@@ -116,6 +117,55 @@ def _cmd_report(args: argparse.Namespace) -> int:
     from .evaluate import report_only
 
     report_only(Path(args.out), quiet=args.quiet)
+    return 0
+
+
+def _cmd_collect(args: argparse.Namespace) -> int:
+    from .learn.collect import CollectOptions, collect
+
+    t0 = time.perf_counter()
+    opts = CollectOptions(suite=args.suite, passes=args.passes, seed=args.seed, every=args.every,
+                          traffic=args.traffic, workers=args.workers, limit=args.limit,
+                          driver=args.driver or "")
+    m = collect(opts, Path(args.out))
+    print(f"{len(m['episodes'])} episodes, {m['frames']} frames in {time.perf_counter() - t0:.1f} s "
+          f"-> {args.out}")
+    return 0
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from .learn.train import read_config, train
+
+    cfg = read_config(Path(args.config), augment_instructions=True if args.augment_instructions else None,
+                      steps=args.steps, device=args.device, seed=args.seed)
+    m = train(cfg, [Path(d) for d in args.data], Path(args.out))
+    print(f"step {m.get('step')}: validation {m.get('val', {})} -> {Path(args.out) / 'model.pt'}")
+    return 0
+
+
+def _cmd_check_agent(args: argparse.Namespace) -> int:
+    from .agents.check import check_agent
+
+    t0 = time.perf_counter()
+    rep = check_agent(args.spec, route=args.route, timeout=args.timeout, max_act_ms=args.max_act_ms,
+                      max_decisions=args.decisions)
+    print(f"icrsumo check-agent {args.spec} (route {rep.route}, baseline instructions)")
+    for f in rep.findings:
+        tag = "ok     " if f.ok else "PROBLEM" if f.ok is False else "note   "
+        print(f"  {tag}  {f.text}")
+    n = len(rep.problems)
+    if n:
+        print(f"{n} problem{'s' if n > 1 else ''} found: fix {'them' if n > 1 else 'it'} before evaluating "
+              f"this agent ({time.perf_counter() - t0:.1f} s)")
+        return 1
+    print(f"the agent follows the protocol ({time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
+def _cmd_serve_agent(args: argparse.Namespace) -> int:
+    from .agents.serve import serve
+
+    serve(args.spec, host=args.host, port=args.port, max_batch=args.max_batch)
     return 0
 
 
@@ -195,8 +245,8 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--suite", default="tiny",
                    help="tiny (default), short, long, a route XML file or a convert-routes folder")
     v.add_argument("--agent", action="append",
-                   help="built-in name, module:Class or path/file.py:Class (repeatable; default "
-                   "instruction-follower)")
+                   help="built-in name, module:Class, path/file.py:Class or remote:http://HOST:PORT "
+                   "(repeatable; default instruction-follower)")
     v.add_argument("--family", action="append",
                    help="paraphrase, ambiguity, noise, misleading (repeatable; default all four)")
     v.add_argument("--k", type=int, default=8, help="variants per family (default 8)")
@@ -210,12 +260,78 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--out", default="icr_out", help="output folder (default icr_out)")
     v.add_argument("--rollout-route", help="route of the paired rollout figure (default: the first)")
     v.add_argument("--quiet", action="store_true", help="no progress bar or table")
+    v.add_argument("--agent-timeout", type=float, default=60.0, metavar="S",
+                   help="seconds an agent's reset/act call may take before the episode is stored as "
+                   "crashed (default 60; 0: no limit)")
     v.set_defaults(func=_cmd_evaluate)
 
     r = sub.add_parser("report", help="rebuild summary, tables and figures of an evaluation folder")
     r.add_argument("out", help="the --out folder of icrsumo evaluate")
     r.add_argument("--quiet", action="store_true")
     r.set_defaults(func=_cmd_report)
+
+    ca = sub.add_parser(
+        "check-agent", help="check that an agent follows the agent protocol, in plain words",
+        description="Load an agent spec, check reset/act/name/privileged, drive two episodes of a short "
+        "bundled scenario with the same seed and report broken actions, exceptions, hangs, "
+        "non-determinism and slowness. Exit status 0: fine, 1: problems, 2: bad input.",
+    )
+    ca.add_argument("spec", help="built-in name, module:Class, path/file.py:Class or remote:http://HOST:PORT")
+    ca.add_argument("--route", default="tiny_003", help="bundled tiny route to drive (default tiny_003)")
+    ca.add_argument("--timeout", type=float, default=10.0, metavar="S",
+                    help="seconds one agent call may take before it counts as hung (default 10)")
+    ca.add_argument("--max-act-ms", type=float, default=100.0,
+                    help="mean act() time above which the agent is too slow (default 100 ms, real time)")
+    ca.add_argument("--decisions", type=int, default=300, help="decisions per run at most (default 300)")
+    ca.set_defaults(func=_cmd_check_agent)
+
+    sa = sub.add_parser(
+        "serve-agent", help="serve an agent over HTTP (protocol icrsumo-agent/1) for remote:URL",
+        description="Wrap an agent spec in an HTTP server: one agent instance per episode session, "
+        "concurrent act requests batched (through the agent's act_batch hook if it has one). Use it "
+        "with icrsumo evaluate --agent remote:http://HOST:PORT.",
+    )
+    sa.add_argument("spec", help="built-in name, module:Class or path/file.py:Class (not privileged)")
+    sa.add_argument("--port", type=int, default=8765, help="TCP port (default 8765; 0: any free port)")
+    sa.add_argument("--host", default="127.0.0.1",
+                    help="address to bind (default 127.0.0.1; 0.0.0.0 exposes the agent to the network)")
+    sa.add_argument("--max-batch", type=int, default=8, help="act requests per batch at most (default 8)")
+    sa.set_defaults(func=_cmd_serve_agent)
+
+    c = sub.add_parser(
+        "collect", help="expert driving data (BEV, speed, instruction, expert plan) for training",
+        description="Drive the train split (never an evaluation split) with the route-oracle as "
+        "expert, with perturbed passes for recovery data; store bit-packed rasters and labels per "
+        "episode (resumable).",
+    )
+    c.add_argument("--out", required=True, help="output folder")
+    c.add_argument("--suite", default="train", help="train (default), a route XML or a convert-routes folder")
+    c.add_argument("--passes", type=int, default=3, help="passes per route; pass 0 clean, others perturbed")
+    c.add_argument("--seed", type=int, default=0, help="seed of phrasings and perturbations")
+    c.add_argument("--every", type=int, default=2, help="store every n-th agent step (default 2: 5 Hz)")
+    c.add_argument("--traffic", choices=["none", "light", "normal", "dense"], default="normal")
+    c.add_argument("--limit", type=int, default=0, help="only the first N routes (0: all)")
+    c.add_argument("--driver", help="learned agent (name or checkpoint) that drives while the expert "
+                   "labels (DAgger)")
+    c.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="worker processes (default: number of cores)")
+    c.set_defaults(func=_cmd_collect)
+
+    t = sub.add_parser(
+        "train", help="train a learned agent on collected data (resumes from OUT/last.pt)",
+        description="Behaviour cloning of the expert's plan; config in a TOML file; writes "
+        "OUT/train_log.jsonl, OUT/last.pt and OUT/model.pt.",
+    )
+    t.add_argument("config", help="TOML training config (see icrsumo/learn/checkpoints/*.toml)")
+    t.add_argument("--data", required=True, action="append",
+                   help="folder written by icrsumo collect (repeatable)")
+    t.add_argument("--out", required=True, help="output folder")
+    t.add_argument("--augment-instructions", action="store_true",
+                   help="train on paraphrase and noise variants from the training bank")
+    t.add_argument("--steps", type=int, help="override the config's steps")
+    t.add_argument("--seed", type=int, help="override the config's seed")
+    t.add_argument("--device", help="auto (default), cpu or cuda")
+    t.set_defaults(func=_cmd_train)
     return parser
 
 

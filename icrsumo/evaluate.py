@@ -12,20 +12,31 @@ on the same scenario, seed and traffic. The out folder holds everything (reused 
 Episodes run in worker processes (one SUMO each: ``--workers``, default the number of cores)
 or on Ray (``--backend ray``). Every episode is deterministic, so results do not depend on the
 backend or the worker count. An episode that raises is retried once, then stored as crashed.
+
+Hung agents: every ``reset`` / ``act`` call has ``agent_timeout`` seconds (``--agent-timeout``,
+default 60). The local backend's parent process watches each worker's current agent call and
+kills and replaces a worker whose call overruns (this stops any hang, also in C code); Ray
+workers interrupt the call with SIGALRM (hangs in Python code). The episode is stored as
+crashed with "agent did not answer within N s", without a retry, and the run goes on.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import multiprocessing
+import multiprocessing.connection
 import os
+import signal
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .agents.base import AgentTimeout
 from .agents.registry import DEFAULT_AGENT, agent_factory, agent_name
 from .convert import ConvertOptions, convert_routes, safe_name
 from .errors import InputError
@@ -38,11 +49,14 @@ from .store import ResultStore
 from .types import EpisodeRecord
 
 BACKENDS = ("local", "ray")
+#: seconds an agent's reset / act call may take by default (--agent-timeout)
+AGENT_TIMEOUT = 60.0
 
 
 @dataclass(frozen=True)
 class EvalOptions:
-    """One evaluation. ``routes``: a subset of route ids (None: all)."""
+    """One evaluation. ``routes``: a subset of route ids (None: all). ``agent_timeout``: s an
+    agent's reset / act call may take (None: no limit, and ``workers=1`` runs in-process)."""
 
     out: Path
     suite: str = "tiny"
@@ -57,6 +71,7 @@ class EvalOptions:
     traffic: str = "normal"
     quiet: bool = False
     rollout_route: str | None = None
+    agent_timeout: float | None = AGENT_TIMEOUT
 
     def check(self) -> None:
         bad = [f for f in self.families if f not in FAMILIES]
@@ -69,6 +84,9 @@ class EvalOptions:
             raise InputError("--k", str(self.k), "out of range", "use 1 to 64 (default 8)")
         if self.workers < 1:
             raise InputError("--workers", str(self.workers), "must be at least 1", "give a positive count")
+        if self.agent_timeout is not None and not self.agent_timeout > 0:
+            raise InputError("--agent-timeout", str(self.agent_timeout), "must be positive",
+                             "give seconds per agent call (0 on the command line: no limit)")
         for spec in self.agents:
             agent_factory(spec)
         p = Path(self.suite)
@@ -89,6 +107,8 @@ class Job:
     seed: int
     scenario: str
     instructions: str
+    #: s per agent call, enforced in the worker with SIGALRM where no parent watches (Ray)
+    timeout: float | None = None
 
     @property
     def key(self) -> tuple[str, str, str, int, int]:
@@ -97,6 +117,59 @@ class Job:
 
 # --------------------------------------------------------------------------- workers
 _AGENTS: dict[str, Callable] = {}
+#: in a local pool worker: shared double, time.monotonic() when the current agent call began
+#: (0.0: none); the parent kills the worker when a call overruns the timeout
+_WATCH = None
+
+
+class _Watched:
+    """An agent whose ``reset`` / ``act`` calls are timed: marked in the worker's watch slot (the
+    parent enforces the timeout), else interrupted by SIGALRM after ``timeout`` s (main thread
+    only). ``name`` and ``privileged`` are the agent's, so the episode is the same."""
+
+    def __init__(self, agent, slot, timeout: float | None) -> None:
+        self._agent, self._slot, self._timeout = agent, slot, timeout
+        self.name = getattr(agent, "name", type(agent).__name__)
+        self.privileged = getattr(agent, "privileged", False)
+        self._alarm = (slot is None and timeout is not None and hasattr(signal, "SIGALRM")
+                       and threading.current_thread() is threading.main_thread())
+
+    def _call(self, fn, arg):
+        if self._slot is not None:
+            self._slot.value = time.monotonic()
+            try:
+                return fn(arg)
+            finally:
+                self._slot.value = 0.0
+        if not self._alarm:
+            return fn(arg)
+        timeout = self._timeout
+
+        def expired(signum, frame):
+            raise AgentTimeout(f"agent did not answer within {timeout:g} s")
+
+        old = signal.signal(signal.SIGALRM, expired)
+        signal.setitimer(signal.ITIMER_REAL, timeout)
+        try:
+            return fn(arg)
+        finally:
+            signal.setitimer(signal.ITIMER_REAL, 0.0)
+            signal.signal(signal.SIGALRM, old)
+
+    def __getattr__(self, attr: str):  # anything else is the agent's own
+        return getattr(self.__dict__["_agent"], attr)
+
+    def reset(self, info):
+        return self._call(self._agent.reset, info)
+
+    def act(self, obs):
+        return self._call(self._agent.act, obs)
+
+    def close(self) -> None:
+        """The agent's optional ``close()`` (best effort: its errors are ignored)."""
+        if callable(getattr(self._agent, "close", None)):
+            with contextlib.suppress(Exception):
+                self._agent.close()
 
 
 def run_job(job: Job) -> tuple[EpisodeRecord | None, str, str]:
@@ -113,7 +186,11 @@ def run_job(job: Job) -> tuple[EpisodeRecord | None, str, str]:
         sc = read_scenario(Path(job.scenario))
         sets = [s for s in read_instruction_sets(Path(job.instructions))
                 if s.family == job.family and s.k == job.k]
-        log = run_episode(sc, sets[0], factory())
+        agent = _Watched(factory(), _WATCH, job.timeout)
+        try:
+            log = run_episode(sc, sets[0], agent)
+        finally:
+            agent.close()  # the optional close() hook: e.g. a remote agent ends its session
         r = score_episode(log)
         rec = EpisodeRecord(
             agent=job.agent, route_id=job.route_id, family=job.family, k=job.k, seed=job.seed,
@@ -130,26 +207,104 @@ def run_job(job: Job) -> tuple[EpisodeRecord | None, str, str]:
 
 
 # --------------------------------------------------------------------------- backends
-def _local(jobs: list[Job], workers: int) -> Iterator[tuple[Job, tuple]]:
-    if workers == 1:
+def _worker_main(conn, slot) -> None:
+    """A local pool worker: run the jobs it is sent, one at a time, until it is sent None."""
+    global _WATCH
+    _WATCH = slot
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    while True:
+        try:
+            job = conn.recv()
+        except (EOFError, OSError):
+            return
+        if job is None:
+            return
+        conn.send(run_job(job))
+
+
+class _Worker:
+    """One worker process, its pipe and its watch slot (see :data:`_WATCH`)."""
+
+    def __init__(self, ctx) -> None:
+        self.slot = ctx.Value("d", 0.0, lock=False)
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_worker_main, args=(child, self.slot), daemon=True)
+        self.proc.start()
+        child.close()
+        self.job: Job | None = None
+
+    def send(self, job: Job) -> None:
+        self.job = job
+        self.slot.value = 0.0
+        self.conn.send(job)
+
+    def stop(self, kill: bool = False) -> None:
+        if not kill:
+            try:
+                self.conn.send(None)
+                self.proc.join(timeout=10)
+            except (OSError, ValueError):
+                pass
+        if self.proc.is_alive():
+            self.proc.kill()
+            self.proc.join()
+        self.conn.close()
+
+
+def _local(jobs: list[Job], workers: int, timeout: float | None = None) -> Iterator[tuple[Job, tuple]]:
+    """Run ``jobs`` in ``workers`` processes; a worker whose agent call overruns ``timeout`` s
+    (or that dies) is replaced and its episode reported as failed. ``workers == 1`` without a
+    timeout runs in this process."""
+    if workers == 1 and timeout is None:
         for job in jobs:
             yield job, run_job(job)
         return
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        pending = {}
-        it = iter(jobs)
-        for job in it:
-            pending[pool.submit(run_job, job)] = job
-            if len(pending) >= 2 * workers:
-                break
-        while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for fut in done:
-                job = pending.pop(fut)
-                yield job, fut.result()
-                nxt = next(it, None)
-                if nxt is not None:
-                    pending[pool.submit(run_job, nxt)] = nxt
+    if not jobs:
+        return
+    ctx = multiprocessing.get_context()
+    it = iter(jobs)
+    busy: dict = {}
+    pool: list[_Worker] = []
+
+    def feed(w: _Worker) -> None:
+        job = next(it, None)
+        if job is not None:
+            w.send(job)
+            busy[w.conn] = w
+
+    try:
+        for _ in range(min(workers, len(jobs))):
+            pool.append(_Worker(ctx))
+            feed(pool[-1])
+        while busy:
+            for conn in multiprocessing.connection.wait(list(busy), timeout=0.2):
+                w = busy.pop(conn)
+                job, w.job = w.job, None
+                try:
+                    result = conn.recv()
+                except (EOFError, OSError):
+                    w.proc.join(timeout=5)
+                    result = (None, "", f"WorkerDied: the worker process died (exit code {w.proc.exitcode}) "
+                                        f"while running this episode")
+                    w.stop(kill=True)
+                    pool[pool.index(w)] = w = _Worker(ctx)
+                yield job, result
+                feed(w)
+            if timeout is not None:
+                now = time.monotonic()
+                for conn, w in list(busy.items()):
+                    began = w.slot.value
+                    if began and now - began > timeout:
+                        busy.pop(conn)
+                        job = w.job
+                        w.stop(kill=True)
+                        pool[pool.index(w)] = w = _Worker(ctx)
+                        yield job, (None, "", f"AgentTimeout: agent did not answer within {timeout:g} s "
+                                              f"(its worker process was stopped)")
+                        feed(w)
+    finally:
+        for w in pool:
+            w.stop(kill=w.conn in busy)
 
 
 def _ray(jobs: list[Job], workers: int, address: str | None) -> Iterator[tuple[Job, tuple]]:
@@ -252,7 +407,8 @@ def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path) -> list[Job]:
         for d, sc in scs:
             instr = str(instr_dir / f"{safe_name(sc.route_id)}.json")
             for fam, k in sets:
-                jobs.append(Job(spec, name, sc.route_id, fam, k, opts.seed, str(d), instr))
+                jobs.append(Job(spec, name, sc.route_id, fam, k, opts.seed, str(d), instr,
+                                timeout=opts.agent_timeout if opts.backend == "ray" else None))
     return jobs
 
 
@@ -279,13 +435,13 @@ def evaluate(opts: EvalOptions) -> dict:
         while queue:
             retry = []
             stream = _ray(queue, opts.workers, opts.address) if opts.backend == "ray" \
-                else _local(queue, opts.workers)
+                else _local(queue, opts.workers, opts.agent_timeout)
             for job, (rec, log_json, err) in stream:
                 n = attempts[job.key] = attempts.get(job.key, 0) + 1
                 if rec is not None:
                     store.put(EpisodeRecord(**{**rec.__dict__, "attempts": n}), log_json)
                     progress.tick()
-                elif n < 2:
+                elif n < 2 and not err.startswith(f"{AgentTimeout.__name__}:"):  # a hang is not retried
                     retry.append(job)
                 else:
                     store.put(EpisodeRecord(job.agent, job.route_id, job.family, job.k, job.seed,

@@ -163,9 +163,16 @@ class BevRenderer:
         #: stop-line thickness (px)
         self._stop_px = max(1, int(round(STOP_LINE_M / mpp)))
         self._draw_static()
+        #: the drivable layer as bytes, row-major, for per-point lookups (drivable_xy)
+        self._drivable = self.canvas[..., 0].tobytes()
         self._build_tls()
         self._tl_cache: dict[tuple[int, str], np.ndarray] = {}
+        self._tl_draw_cache: dict[tuple, tuple[np.ndarray, tuple]] = {}
+        self._ego_cache: dict[tuple[float, float], np.ndarray] = {}
         self._view_radius = spec.view_radius_m
+        #: per light: centre x, y and the squared visibility radius (view reach + its extent)
+        lims = ((self._view_radius + self._tl_radius) ** 2).tolist()  # array square: x * x
+        self._tl_near = [(x, y, lim) for (x, y), lim in zip(self._tl_centre.tolist(), lims)]
 
     # ------------------------------------------------------------------ static layers
     def _world_to_canvas(self, p: np.ndarray) -> np.ndarray:
@@ -185,6 +192,35 @@ class BevRenderer:
         out = np.zeros(len(cr), dtype=bool)
         out[inside] = self.canvas[cr[inside, 1], cr[inside, 0], 0] > 0
         return out
+
+    def drivable_xy(self, x: float, y: float) -> bool:
+        """:meth:`drivable_at` of one point (x, y) m, same rounding, without arrays (the runner
+        asks this for the ego's four corners every simulation step)."""
+        mpp = self.spec.m_per_px
+        try:
+            col = round((x - self.x0) / mpp)
+            row = round((self.y1 - y) / mpp)
+        except (ValueError, OverflowError):  # NaN / inf: outside the canvas
+            return False
+        h, w = self.canvas.shape[:2]
+        return 0 <= col < w and 0 <= row < h and self._drivable[row * w + col] != 0
+
+    def count_off(self, points) -> int:
+        """How many of ``points`` (an iterable of (x, y) m) are off the drivable area:
+        :meth:`drivable_xy` of each, in one call."""
+        mpp, x0, y1, lane = self.spec.m_per_px, self.x0, self.y1, self._drivable
+        h, w = self.canvas.shape[:2]
+        n = 0
+        for x, y in points:
+            try:
+                col = round((x - x0) / mpp)
+                row = round((y1 - y) / mpp)
+            except (ValueError, OverflowError):
+                n += 1
+                continue
+            if not (0 <= col < w and 0 <= row < h and lane[row * w + col] != 0):
+                n += 1
+        return n
 
     def _stop_line(self, lane_id: str) -> tuple[np.ndarray, np.ndarray]:
         """Stop line of a lane: (left end, right end) in world m, perpendicular to the lane's last
@@ -310,6 +346,36 @@ class BevRenderer:
         return out
 
     # ------------------------------------------------------------------ per step
+    def _ego_layer(self, length: float, width: float) -> np.ndarray:
+        """The ego channel for an ego of ``length`` x ``width`` m (cached per size)."""
+        key = (length, width)
+        got = self._ego_cache.get(key)
+        if got is None:
+            sp = self.spec
+            r0, c0 = sp.ego_row, sp.ego_col
+            hl, hw = length / 2.0 / sp.m_per_px, width / 2.0 / sp.m_per_px
+            poly = _fx([[c0 - hw, r0 - hl], [c0 + hw, r0 - hl], [c0 + hw, r0 + hl], [c0 - hw, r0 + hl]])
+            got = np.zeros((sp.height, sp.width), dtype=np.uint8)
+            cv2.fillConvexPoly(got, poly, 255, cv2.LINE_8, _SHIFT)
+            got.setflags(write=False)
+            if len(self._ego_cache) > 16:
+                self._ego_cache.clear()
+            self._ego_cache[key] = got
+        return got
+
+    def _tl_draw(self, key: tuple[tuple[int, str], ...]) -> tuple[np.ndarray, tuple]:
+        """Stop-line segments (n, 2, 2) world m of the visible lights ``key`` ((tls index,
+        state), ...) and the masks of those drawn 'stop' and 'go' (None: none), cached."""
+        got = self._tl_draw_cache.get(key)
+        if got is None:
+            seg = self._tl_seg[np.concatenate([self._tl_rows[k] for k, _ in key])]
+            cls_all = np.concatenate([self._tl_classes(k, state) for k, state in key])
+            masks = tuple(m if m.any() else None for m in (cls_all == 1, cls_all == 2))
+            if len(self._tl_draw_cache) > 4096:
+                self._tl_draw_cache.clear()
+            got = self._tl_draw_cache[key] = (seg, masks)
+        return got
+
     def _tl_classes(self, k: int, state: str) -> np.ndarray:
         """Per stop-line segment of tls ``k``: 0 nothing, 1 stop, 2 go (cached per state)."""
         key = (k, state)
@@ -383,41 +449,42 @@ class BevRenderer:
                 layer = out[_VEHICLES]
                 for poly in polys:
                     cv2.fillConvexPoly(layer, poly, 255, cv2.LINE_8, _SHIFT)
-        # pedestrians: squares in the ego frame
+        # pedestrians: squares in the ego frame (a handful per frame: plain Python around the
+        # one transform, the same arithmetic as on arrays)
         if pedestrians is not None and len(pedestrians):
-            ped = np.asarray(pedestrians, dtype=np.float64).reshape(-1, 2)
-            d2 = (ped[:, 0] - ex) ** 2 + (ped[:, 1] - ey) ** 2
-            ped = ped[d2 <= (reach + PEDESTRIAN_M) ** 2]
-            if len(ped):
-                ctr = (ped @ lin + off) / _ONE
+            lim = (reach + PEDESTRIAN_M) ** 2
+            near = []
+            for px, py in np.asarray(pedestrians, dtype=np.float64).reshape(-1, 2).tolist():
+                dx, dy = px - ex, py - ey
+                if dx * dx + dy * dy <= lim:
+                    near.append((px, py))
+            if near:
+                ctr = ((np.array(near) @ lin + off) / _ONE).tolist()
                 h = max(PEDESTRIAN_M / 2.0 / mpp, 1.0)
-                lo = np.maximum(np.floor(ctr - h + 0.5), 0).astype(np.int64)
-                hi = np.minimum(np.floor(ctr + h + 0.5), [sp.width, sp.height]).astype(np.int64)
                 layer = out[_PEDESTRIANS]
-                for x_lo, y_lo, x_hi, y_hi in np.concatenate([lo, hi], axis=1).tolist():
+                floor, w_px, h_px = math.floor, sp.width, sp.height
+                for cx, cy in ctr:
+                    x_lo, y_lo = max(floor(cx - h + 0.5), 0), max(floor(cy - h + 0.5), 0)
+                    x_hi, y_hi = min(floor(cx + h + 0.5), w_px), min(floor(cy + h + 0.5), h_px)
                     if x_lo < x_hi and y_lo < y_hi:
                         layer[y_lo:y_hi, x_lo:x_hi] = 255
-        # ego: axis-aligned in its own frame
-        hl, hw = float(ego_size[0]) / 2.0 / mpp, float(ego_size[1]) / 2.0 / mpp
-        ego_poly = _fx([[c0 - hw, r0 - hl], [c0 + hw, r0 - hl], [c0 + hw, r0 + hl], [c0 - hw, r0 + hl]])
-        cv2.fillConvexPoly(out[_EGO], ego_poly, 255, cv2.LINE_8, _SHIFT)
+        # ego: axis-aligned in its own frame, the same layer every frame
+        out[_EGO] = self._ego_layer(float(ego_size[0]), float(ego_size[1]))
         # traffic-light stop lines of the lights near enough to be seen
-        if tl_states and len(self._tl_centre):
-            d2 = (self._tl_centre[:, 0] - ex) ** 2 + (self._tl_centre[:, 1] - ey) ** 2
-            rows, cls = [], []
-            for k in np.nonzero(d2 <= (reach + self._tl_radius) ** 2)[0].tolist():
-                state = tl_states.get(self.tls_ids[k])
-                if state:
-                    rows.append(self._tl_rows[k])
-                    cls.append(self._tl_classes(k, state))
-            if rows:
-                seg = self._tl_seg[np.concatenate(rows)]                   # (n, 2, 2) world
+        if tl_states and self._tl_near:
+            key = []
+            for k, (cx, cy, lim) in enumerate(self._tl_near):
+                dx, dy = cx - ex, cy - ey
+                if dx * dx + dy * dy <= lim:
+                    state = tl_states.get(self.tls_ids[k])
+                    if state:
+                        key.append((k, state))
+            if key:
+                seg, masks = self._tl_draw(tuple(key))
                 pts = np.rint(seg @ lin + off).astype(np.int32)
-                cls_all = np.concatenate(cls)
-                for which, ch in ((1, _STOP), (2, _GO)):
-                    sel = pts[cls_all == which]
-                    if len(sel):
-                        cv2.polylines(out[ch], sel, False, 255, self._stop_px, cv2.LINE_8, _SHIFT)
+                for mask, ch in zip(masks, (_STOP, _GO)):
+                    if mask is not None:
+                        cv2.polylines(out[ch], pts[mask], False, 255, self._stop_px, cv2.LINE_8, _SHIFT)
         return out
 
 

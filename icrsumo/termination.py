@@ -88,10 +88,11 @@ class TerminationMonitor:
         return kind
 
     def _check(self, t: float, progress: float, route_dist: float, events: Sequence[Event]) -> str | None:
-        kinds = {e.kind for e in events}
-        for event_kind, kind in ENDING_EVENTS.items():
-            if event_kind in kinds:
-                return kind
+        if events:
+            kinds = {e.kind for e in events}
+            for event_kind, kind in ENDING_EVENTS.items():
+                if event_kind in kinds:
+                    return kind
         if is_route_complete(progress, self.route_length):
             return "completed"
         if route_dist > DEVIATION_M + EPS:

@@ -226,3 +226,15 @@ def test_leaving_the_drivable_area_is_a_static_collision_and_video(quiet, tmp_pa
     assert any(e.kind == "collision_static" for e in log.events)
     assert any(i.kind == "collision_static" for i in score_episode(log).infractions)
     assert video.exists() or video.with_suffix(".avi").exists()
+
+
+def test_loop_timings_are_filled_and_change_nothing(quiet):
+    from icrsumo.runner import LoopTimings, RunOptions
+
+    sc, sets = _load(quiet, "tiny", "tiny_005")
+    tm = LoopTimings()
+    timed = run_episode(sc, sets[0], RouteOracle(), RunOptions(timings=tm))
+    plain = run_episode(sc, sets[0], RouteOracle())
+    assert dumps_log(timed) == dumps_log(plain)
+    assert tm.steps == len(plain.t) and tm.frames == tm.acts == (tm.steps + 1) // 2
+    assert 0 < tm.render_s < tm.loop_s and 0 < tm.act_s < tm.loop_s and tm.setup_s > 0

@@ -9,6 +9,8 @@ instruction-follower) also receive a :class:`World` view of the simulator state.
 
 from __future__ import annotations
 
+import inspect
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
@@ -95,8 +97,36 @@ class Agent(Protocol):
     def act(self, obs: Observation) -> Action: ...
 
 
+def batch_hook(cls: object) -> Callable[[list, list[Observation]], list[Action]] | None:
+    """The optional batched-inference hook of an agent class as ``f(agents, observations)``, or
+    None. Two forms (``icrsumo serve-agent`` uses it to act for several episodes at once):
+
+    * ``act_batch(agents, observations) -> list[Action]`` as a ``staticmethod`` or
+      ``classmethod``: ``agents[i]`` is the episode's own instance (reset for it) and sees
+      ``observations[i]``; per-episode state stays in each instance;
+    * ``def act_batch(self, observations) -> list[Action]``: called on the first agent of the
+      batch, for agents whose ``act`` depends only on the observation and shared weights.
+
+    Either must return what each agent's ``act`` would return for its observation."""
+    if not isinstance(cls, type):
+        return None
+    raw = inspect.getattr_static(cls, "act_batch", None)
+    if isinstance(raw, (staticmethod, classmethod)):
+        fn = cls.act_batch
+        return lambda agents, observations: fn(agents, observations)
+    if callable(raw):
+        return lambda agents, observations: agents[0].act_batch(observations)
+    return None
+
+
 class AgentError(RuntimeError):
     """An agent broke the protocol (wrong action type or shape, NaN, ...)."""
+
+
+class AgentTimeout(AgentError):
+    """An agent did not answer within its time limit (``icrsumo evaluate --agent-timeout``, or a
+    remote agent's request timeout). ``icrsumo evaluate`` stores the episode as crashed at once:
+    a retry would wait the whole timeout again."""
 
 
 def validate_action(action: object) -> Action:

@@ -1,4 +1,5 @@
-"""Agent specs -> agent factories: built-in names, ``module:Class`` or ``path/file.py:Class``."""
+"""Agent specs -> agent factories: built-in names, ``module:Class``, ``path/file.py:Class`` or
+``remote:http://HOST:PORT``."""
 
 from __future__ import annotations
 
@@ -9,19 +10,28 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ..errors import InputError
+from ..learn.agent import CHECKPOINTS, NgramAgent, NgramAugAgent, TokenAgent
 from .base import Agent
 from .privileged import InstructionFollower, RouteOracle
 
 BUILTIN: dict[str, type] = {"route-oracle": RouteOracle, "instruction-follower": InstructionFollower}
+# learned agents whose checkpoints ship with the package (torch loads on first use)
+BUILTIN.update({cls.name: cls for cls in (TokenAgent, NgramAgent, NgramAugAgent)
+                if (CHECKPOINTS / cls.checkpoint).is_file()})
 #: the agent `icrsumo evaluate` uses when none is named
 DEFAULT_AGENT = "instruction-follower"
+#: ``remote:http://HOST:PORT``: an agent behind an icrsumo-agent/1 server (icrsumo.agents.remote)
+REMOTE_PREFIX = "remote:"
 
 
-def _import_class(spec: str) -> type:
+def load_class(spec: str) -> type:
+    """The class of a ``module:Class`` or ``path/file.py:Class`` spec, without checking the
+    protocol (``icrsumo check-agent`` reports what is missing); errors are InputErrors."""
     target, _, cls_name = spec.rpartition(":")
     if not target or not cls_name:
         raise InputError("--agent", spec, "not a built-in agent nor MODULE:CLASS",
-                         f"use one of {', '.join(BUILTIN)}, a module:Class or path/file.py:Class")
+                         f"use one of {', '.join(BUILTIN)}, a module:Class, path/file.py:Class or "
+                         "remote:http://HOST:PORT")
     try:
         if target.endswith(".py"):
             path = Path(target)
@@ -42,6 +52,14 @@ def _import_class(spec: str) -> type:
     cls = getattr(module, cls_name, None)
     if cls is None:
         raise InputError("--agent", spec, f"{target} has no attribute {cls_name}", "check the class name")
+    if not callable(cls):
+        raise InputError("--agent", spec, f"{target}.{cls_name} is not a class", "name the agent class")
+    return cls
+
+
+def _import_class(spec: str) -> type:
+    cls = load_class(spec)
+    cls_name = spec.rpartition(":")[2]
     missing = [m for m in ("reset", "act") if not callable(getattr(cls, m, None))]
     if missing:
         raise InputError("--agent", spec, f"{cls_name} does not implement the agent protocol "
@@ -53,6 +71,10 @@ def agent_factory(spec: str) -> Callable[[], Agent]:
     """A zero-argument factory of fresh agents for ``spec``; errors are InputErrors."""
     if spec in BUILTIN:
         return BUILTIN[spec]
+    if spec.startswith(REMOTE_PREFIX):
+        from .remote import remote_factory
+
+        return remote_factory(spec[len(REMOTE_PREFIX):])
     return _import_class(spec)
 
 

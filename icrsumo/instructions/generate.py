@@ -21,6 +21,7 @@ from ..errors import InputError
 from ..fsio import dumps_json, write_atomic
 from ..networks import load_net
 from ..scenario import Scenario, find_scenarios, read_scenario
+from ..types import InstructionSet, Maneuver
 from .banks import Banks, load_banks
 from .baseline import build_baseline
 from .families import FAMILIES, make_variants
@@ -70,14 +71,20 @@ def _highway_spans(sc: Scenario, net) -> tuple[tuple[float, float], ...]:
                  if i + 1 < len(cuts) and is_highway(net, e))
 
 
+def baseline_set(sc: Scenario, banks: Banks, seed: int) -> tuple[InstructionSet, list[Maneuver]]:
+    """The baseline sequence of a scenario with phrasings drawn by ``seed`` (the protocol uses
+    the route seed; data collection draws other phrasings), and the route's maneuvers."""
+    net = load_net(sc.net)
+    maneuvers = extract_maneuvers(sc, net)
+    return build_baseline(sc.route_id, sc.length, maneuvers, banks, seed,
+                          _highway_spans(sc, net), net.crossing_nodes), maneuvers
+
+
 def generate_route(scenario_dir: Path, opts: GenerateOptions) -> tuple[str, dict]:
     """The instruction document of one converted route."""
     sc = read_scenario(scenario_dir)
-    net = load_net(sc.net)
     banks = _banks(str(opts.templates) if opts.templates else None)
-    maneuvers = extract_maneuvers(sc, net)
-    baseline = build_baseline(sc.route_id, sc.length, maneuvers, banks, sc.seed,
-                              _highway_spans(sc, net), net.crossing_nodes)
+    baseline, maneuvers = baseline_set(sc, banks, sc.seed)
     if opts.llm is None:
         variants = make_variants(baseline, opts.families, opts.k, banks, opts.seed,
                                  route_rng(opts.seed, sc.route_id))

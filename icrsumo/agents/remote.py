@@ -1,0 +1,319 @@
+"""Remote agents: the ``icrsumo-agent/1`` protocol (HTTP/1.1 + JSON) and its client.
+
+An agent runs in its own process or on another machine behind an HTTP server (the reference
+server is ``icrsumo serve-agent``, :mod:`icrsumo.agents.serve`); ``--agent
+remote:http://HOST:PORT`` drives it. Every body is a JSON object carrying
+``"protocol": "icrsumo-agent/1"``; arrays travel as ``{"dtype", "shape", "data"}`` with
+``data`` the base64 of the zlib-compressed little-endian C-order bytes.
+
+=====================  ==========================================  ==================================
+request                body                                        answer (200)
+=====================  ==========================================  ==================================
+``GET /info``          —                                           ``name``, ``privileged`` (false),
+                                                                   ``batching``, ``max_batch``, ``stats``
+``POST /reset``        ``session`` (client-chosen id), ``info``     ``{}``: a fresh agent instance for
+                       (EpisodeInfo fields)                        the session, reset with ``info``
+``POST /act``          ``session``, ``obs``: ``t``, ``bev``         ``action``: ``{"control": {"steer",
+                       (array), ``speed``, ``instruction``,         "throttle", "brake"}}`` or
+                       ``instruction_id``, ``notice``              ``{"waypoints": array,
+                                                                   "target_speed": number | null}``
+``POST /close``        ``session``                                 ``{}``: the session's agent is dropped
+=====================  ==========================================  ==================================
+
+Any other status carries ``{"error": "..."}`` in plain words (400 malformed request, 404
+unknown path or session, 422 the agent's action broke the protocol, 500 the agent raised). The
+client turns every failure into one line: :class:`AgentTimeout` ("agent did not answer within
+N s") when the server is slower than the per-request timeout, :class:`AgentError` when the
+server is down, answers with an error or with malformed data; an unreachable server at
+planning time is an :class:`icrsumo.errors.InputError` (exit status 2).
+"""
+
+from __future__ import annotations
+
+import base64
+import contextlib
+import http.client
+import json
+import socket
+import uuid
+import zlib
+from dataclasses import asdict
+from typing import Any
+from urllib.parse import parse_qs, urlsplit
+
+import numpy as np
+
+from ..dynamics import Control
+from ..errors import InputError
+from .base import Action, AgentError, AgentTimeout, EpisodeInfo, Observation
+
+PROTOCOL = "icrsumo-agent/1"
+#: seconds a request may take before the client gives up (``?timeout=S`` in the URL overrides)
+DEFAULT_TIMEOUT = 60.0
+#: dtypes an array may have on the wire
+DTYPES = ("uint8", "int8", "int16", "int32", "int64", "float32", "float64", "bool")
+#: largest decompressed array (bytes) a peer accepts
+MAX_ARRAY_BYTES = 64 << 20
+
+
+class ProtocolError(ValueError):
+    """A message that does not follow ``icrsumo-agent/1`` (what is wrong, in plain words)."""
+
+
+# --------------------------------------------------------------------------- codec
+def encode_array(a: np.ndarray) -> dict[str, Any]:
+    """An array as ``{"dtype", "shape", "data"}`` (zlib level 1, base64)."""
+    a = np.asarray(a)
+    if a.dtype.name not in DTYPES:
+        raise ProtocolError(f"arrays of dtype {a.dtype} cannot be sent (use one of {', '.join(DTYPES)})")
+    raw = np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<")).tobytes()
+    return {"dtype": a.dtype.name, "shape": list(a.shape),
+            "data": base64.b64encode(zlib.compress(raw, 1)).decode("ascii")}
+
+
+def decode_array(d: Any, what: str) -> np.ndarray:
+    """The array of :func:`encode_array`'s dict; ProtocolError naming ``what`` when malformed."""
+    if not isinstance(d, dict) or set(d) < {"dtype", "shape", "data"}:
+        raise ProtocolError(f"{what} must be an object with dtype, shape and data")
+    dtype, shape, data = d["dtype"], d["shape"], d["data"]
+    if dtype not in DTYPES:
+        raise ProtocolError(f"{what}: unsupported dtype {dtype!r}")
+    if not isinstance(shape, list) or not all(isinstance(n, int) and n >= 0 for n in shape):
+        raise ProtocolError(f"{what}: shape must be a list of non-negative integers")
+    if not isinstance(data, str):
+        raise ProtocolError(f"{what}: data must be a base64 string")
+    try:
+        packed = base64.b64decode(data, validate=True)
+        dec = zlib.decompressobj()
+        raw = dec.decompress(packed, MAX_ARRAY_BYTES + 1)
+    except (ValueError, zlib.error) as err:
+        raise ProtocolError(f"{what}: data is not base64 of zlib-compressed bytes ({err})") from None
+    dt = np.dtype(dtype).newbyteorder("<")
+    n = int(np.prod(shape)) if shape else 1
+    if len(raw) != n * dt.itemsize or not dec.eof:
+        raise ProtocolError(f"{what}: {len(raw)} bytes do not match dtype {dtype} and shape {shape}")
+    return np.frombuffer(raw, dtype=dt).reshape(shape).astype(np.dtype(dtype), copy=True)
+
+
+def _number(v: Any, what: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ProtocolError(f"{what} must be a number, got {type(v).__name__}")
+    return float(v)
+
+
+def _string(v: Any, what: str) -> str:
+    if not isinstance(v, str):
+        raise ProtocolError(f"{what} must be a string, got {type(v).__name__}")
+    return v
+
+
+def encode_info(info: EpisodeInfo) -> dict[str, Any]:
+    return asdict(info)
+
+
+def decode_info(d: Any) -> EpisodeInfo:
+    if not isinstance(d, dict):
+        raise ProtocolError("info must be an object")
+    try:
+        return EpisodeInfo(route_id=_string(d["route_id"], "info.route_id"),
+                           town=_string(d["town"], "info.town"),
+                           net=_string(d["net"], "info.net"),
+                           step_length=_number(d["step_length"], "info.step_length"),
+                           control_dt=_number(d["control_dt"], "info.control_dt"),
+                           seed=int(_number(d["seed"], "info.seed")))
+    except KeyError as err:
+        raise ProtocolError(f"info lacks {err.args[0]}") from None
+
+
+def encode_obs(obs: Observation) -> dict[str, Any]:
+    return {"t": float(obs.t), "bev": encode_array(obs.bev), "speed": float(obs.speed),
+            "instruction": obs.instruction, "instruction_id": int(obs.instruction_id), "notice": obs.notice}
+
+
+def decode_obs(d: Any) -> Observation:
+    if not isinstance(d, dict):
+        raise ProtocolError("obs must be an object")
+    try:
+        iid = d["instruction_id"]
+        if isinstance(iid, bool) or not isinstance(iid, int):
+            raise ProtocolError("obs.instruction_id must be an integer")
+        return Observation(t=_number(d["t"], "obs.t"), bev=decode_array(d["bev"], "obs.bev"),
+                           speed=_number(d["speed"], "obs.speed"),
+                           instruction=_string(d["instruction"], "obs.instruction"), instruction_id=iid,
+                           notice=_string(d["notice"], "obs.notice"))
+    except KeyError as err:
+        raise ProtocolError(f"obs lacks {err.args[0]}") from None
+
+
+def encode_action(action: Action) -> dict[str, Any]:
+    """A validated action on the wire."""
+    if action.control is not None:
+        c = action.control
+        return {"control": {"steer": float(c.steer), "throttle": float(c.throttle), "brake": float(c.brake)}}
+    ts = action.target_speed
+    return {"waypoints": encode_array(np.asarray(action.waypoints)),
+            "target_speed": None if ts is None else float(ts)}
+
+
+def decode_action(d: Any) -> Action:
+    if not isinstance(d, dict) or ("control" in d) == ("waypoints" in d):
+        raise ProtocolError("action must be an object with exactly one of control or waypoints")
+    if "control" in d:
+        c = d["control"]
+        if not isinstance(c, dict):
+            raise ProtocolError("action.control must be an object")
+        try:
+            return Action(control=Control(steer=_number(c["steer"], "control.steer"),
+                                          throttle=_number(c["throttle"], "control.throttle"),
+                                          brake=_number(c["brake"], "control.brake")))
+        except KeyError as err:
+            raise ProtocolError(f"action.control lacks {err.args[0]}") from None
+    ts = d.get("target_speed")
+    return Action(waypoints=decode_array(d["waypoints"], "action.waypoints"),
+                  target_speed=None if ts is None else _number(ts, "action.target_speed"))
+
+
+def message(**fields: Any) -> bytes:
+    """A protocol message body."""
+    return json.dumps({"protocol": PROTOCOL, **fields}, allow_nan=False).encode("utf-8")
+
+
+# --------------------------------------------------------------------------- client
+def parse_url(url: str) -> tuple[str, int, float]:
+    """(host, port, timeout s) of ``http://HOST:PORT[?timeout=S]``; InputError when malformed."""
+    parts = urlsplit(url)
+    fix = "use remote:http://HOST:PORT, e.g. remote:http://127.0.0.1:8765 (?timeout=S optional)"
+    if parts.scheme != "http" or not parts.hostname:
+        raise InputError("--agent", f"remote:{url}", "not an http://HOST:PORT address", fix)
+    try:
+        port = parts.port or 80
+        timeout = float(parse_qs(parts.query).get("timeout", [DEFAULT_TIMEOUT])[0])
+    except ValueError:
+        raise InputError("--agent", f"remote:{url}", "bad port or timeout", fix) from None
+    if not timeout > 0:
+        raise InputError("--agent", f"remote:{url}", "timeout must be positive", fix)
+    return parts.hostname, port, timeout
+
+
+class _Connection:
+    """One keep-alive HTTP/1.1 connection; every failure becomes an AgentError / AgentTimeout."""
+
+    def __init__(self, url: str, host: str, port: int, timeout: float) -> None:
+        self.url, self.host, self.port, self.timeout = url, host, port, timeout
+        self.conn: http.client.HTTPConnection | None = None
+
+    def close(self) -> None:
+        if self.conn is not None:
+            self.conn.close()
+            self.conn = None
+
+    def request(self, method: str, path: str, body: bytes | None = None) -> dict[str, Any]:
+        where = f"remote agent at {self.url}"
+        try:
+            if self.conn is None:
+                self.conn = http.client.HTTPConnection(self.host, self.port, timeout=self.timeout)
+                self.conn.connect()
+                self.conn.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            headers = {"Content-Type": "application/json"} if body is not None else {}
+            self.conn.request(method, path, body=body, headers=headers)
+            resp = self.conn.getresponse()
+            raw = resp.read()
+        except TimeoutError:
+            self.close()
+            raise AgentTimeout(f"agent did not answer within {self.timeout:g} s ({where}, {path})") from None
+        except ConnectionRefusedError:
+            self.close()
+            raise AgentError(f"{where} is not reachable (connection refused): is icrsumo serve-agent "
+                             f"running there?") from None
+        except (OSError, http.client.HTTPException) as err:
+            self.close()
+            raise AgentError(f"{where}: connection failed ({type(err).__name__}: {err})") from None
+        try:
+            doc = json.loads(raw)
+        except ValueError:
+            raise AgentError(f"{where} answered malformed data: not JSON (HTTP {resp.status}, "
+                             f"{raw[:60]!r})") from None
+        if not isinstance(doc, dict):
+            raise AgentError(f"{where} answered malformed data: not a JSON object")
+        if resp.status != 200:
+            raise AgentError(f"{where}: {doc.get('error') or f'HTTP {resp.status}'}")
+        if doc.get("protocol") != PROTOCOL:
+            raise AgentError(f"{where} answered malformed data: protocol {doc.get('protocol')!r}, "
+                             f"expected {PROTOCOL!r}")
+        return doc
+
+
+class RemoteAgent:
+    """An agent behind an ``icrsumo-agent/1`` server. One session per episode: ``reset``
+    opens it (a fresh agent instance on the server), ``close`` ends it."""
+
+    privileged = False
+
+    def __init__(self, url: str, name: str, timeout: float = DEFAULT_TIMEOUT) -> None:
+        host, port, _ = parse_url(url)
+        self.url, self.name = url, name
+        self._conn = _Connection(url, host, port, timeout)
+        self.session: str | None = None
+
+    def reset(self, info: EpisodeInfo) -> None:
+        self.close()
+        session = uuid.uuid4().hex  # an id only: no effect on any result
+        self._conn.request("POST", "/reset", message(session=session, info=encode_info(info)))
+        self.session = session
+
+    def act(self, obs: Observation) -> Action:
+        if self.session is None:
+            raise AgentError("act() before reset()")
+        doc = self._conn.request("POST", "/act", message(session=self.session, obs=encode_obs(obs)))
+        try:
+            return decode_action(doc.get("action"))
+        except ProtocolError as err:
+            raise AgentError(f"remote agent at {self.url} answered malformed data: {err}") from None
+
+    def close(self) -> None:
+        """End the session on the server (best effort) and the connection."""
+        if self.session is not None:
+            session, self.session = self.session, None
+            with contextlib.suppress(AgentError):
+                self._conn.request("POST", "/close", message(session=session))
+        self._conn.close()
+
+
+class RemoteFactory:
+    """``agent_factory`` of ``remote:URL``: asks ``GET /info`` once (name, protocol) and makes
+    a :class:`RemoteAgent` per episode. The server must be up: InputError otherwise."""
+
+    privileged = False
+
+    def __init__(self, url: str) -> None:
+        host, port, timeout = parse_url(url)
+        self.url, self.timeout = url, timeout
+        conn = _Connection(url, host, port, min(timeout, 10.0))
+        try:
+            info = conn.request("GET", "/info")
+        except AgentError as err:
+            raise InputError("--agent", f"remote:{url}", str(err),
+                             "start it with icrsumo serve-agent SPEC --port N, or fix the address") from None
+        finally:
+            conn.close()
+        name = info.get("name")
+        if not isinstance(name, str) or not name:
+            raise InputError("--agent", f"remote:{url}", "GET /info answered no agent name",
+                             "serve the agent with icrsumo serve-agent")
+        self.name = name
+        self.info = info
+
+    def __call__(self) -> RemoteAgent:
+        return RemoteAgent(self.url, self.name, self.timeout)
+
+
+def remote_factory(url: str) -> RemoteFactory:
+    """The factory of ``remote:URL`` agents (URL: ``http://HOST:PORT[?timeout=S]``)."""
+    return RemoteFactory(url)
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port free on ``host`` right now (for tests and examples)."""
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])

@@ -1,0 +1,280 @@
+"""``icrsumo serve-agent``: the reference ``icrsumo-agent/1`` server wrapping any agent spec.
+
+One agent instance per session (``POST /reset`` makes a fresh one, so parallel episodes never
+share state); every agent call runs on one worker thread, in arrival order per session.
+Concurrent ``POST /act`` requests of parallel episodes are gathered into batches of up to
+``max_batch``: whatever arrived while the previous batch ran. If the agent class has the
+optional ``act_batch`` hook (:func:`icrsumo.agents.base.batch_hook`: a static
+``act_batch(agents, observations)`` with each session's own instance, or a method
+``act_batch(self, observations)`` for stateless agents), a batch is one call of it, e.g. one
+torch forward pass; otherwise each session's ``act`` is called in turn. Privileged agents need
+the simulator's World view, which is not sent over the network: they are refused. Binds
+127.0.0.1 unless told otherwise. A hung agent call blocks the worker thread: clients then time
+out with "agent did not answer within N s".
+"""
+
+from __future__ import annotations
+
+import json
+import queue
+import signal
+import sys
+import threading
+import time
+import traceback
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Any
+
+from ..errors import InputError
+from .base import AgentError, batch_hook, validate_action
+from .registry import agent_factory, agent_name
+from .remote import PROTOCOL, ProtocolError, decode_info, decode_obs, encode_action, message
+
+#: largest request body (bytes) the server reads
+MAX_BODY = 64 << 20
+
+
+@dataclass
+class _Task:
+    kind: str                      # reset | act | close
+    session: str
+    payload: Any = None
+    done: threading.Event = field(default_factory=threading.Event)
+    result: Any = None
+    status: int = 200
+    error: str = ""
+
+
+def _describe(err: BaseException) -> str:
+    """``Type: message at file.py:line`` (the innermost frame)."""
+    tb = traceback.extract_tb(err.__traceback__)
+    where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
+    return f"{type(err).__name__}: {err}{where}"
+
+
+class AgentServer:
+    """An HTTP server for agent ``spec`` on ``host:port`` (port 0: a free one, see ``.port``)."""
+
+    def __init__(self, spec: str, host: str = "127.0.0.1", port: int = 0, max_batch: int = 8,
+                 max_sessions: int = 256) -> None:
+        if max_batch < 1:
+            raise InputError("--max-batch", str(max_batch), "must be at least 1", "give a positive count")
+        factory = agent_factory(spec)
+        if getattr(factory, "privileged", False):
+            raise InputError("serve-agent", spec, "is a privileged agent: it needs the simulator's World "
+                             "view, which is not sent over the network", "serve a non-privileged agent")
+        self.spec, self.factory, self.name = spec, factory, agent_name(spec, factory)
+        self.batch = batch_hook(factory)
+        self.batch_hook = self.batch is not None
+        self.max_batch, self.max_sessions = max_batch, max_sessions
+        self.sessions: OrderedDict[str, Any] = OrderedDict()
+        self.stats = {"resets": 0, "acts": 0, "batches": 0, "largest_batch": 0}
+        self._queue: queue.Queue[_Task | None] = queue.Queue()
+        self._worker = threading.Thread(target=self._work, name="icrsumo-agent-worker", daemon=True)
+        self._worker.start()
+        server = self
+
+        class Handler(_Handler):
+            owner = server
+
+        try:
+            self.httpd = ThreadingHTTPServer((host, port), Handler)
+        except OSError as err:
+            raise InputError("--port", f"{host}:{port}", f"cannot listen ({err.strerror or err})",
+                             "pick a free port or another --host") from None
+        self.httpd.daemon_threads = True
+        self.host, self.port = self.httpd.server_address[:2]
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.host}:{self.port}"
+
+    def info(self) -> dict[str, Any]:
+        return {"name": self.name, "privileged": False, "batching": self.batch_hook,
+                "max_batch": self.max_batch, "sessions": len(self.sessions), "stats": dict(self.stats)}
+
+    def serve_forever(self) -> None:
+        self.httpd.serve_forever(poll_interval=0.2)
+
+    def start(self) -> AgentServer:
+        """Serve on a background thread (for tests and notebooks)."""
+        threading.Thread(target=self.serve_forever, name="icrsumo-agent-http", daemon=True).start()
+        return self
+
+    def shutdown(self) -> None:
+        self.httpd.shutdown()
+        self.httpd.server_close()
+        self._queue.put(None)
+
+    def submit(self, task: _Task) -> _Task:
+        self._queue.put(task)
+        task.done.wait()
+        return task
+
+    # ------------------------------------------------------------------ worker thread
+    def _work(self) -> None:
+        while True:
+            first = self._queue.get()
+            if first is None:
+                return
+            tasks = [first]
+            while True:  # whatever else has arrived: one batch
+                try:
+                    nxt = self._queue.get_nowait()
+                except queue.Empty:
+                    break
+                if nxt is None:
+                    self._queue.put(None)
+                    break
+                tasks.append(nxt)
+            acts = [t for t in tasks if t.kind == "act"]
+            for t in tasks:  # a session's reset always precedes its acts (its client waits)
+                if t.kind != "act":
+                    self._run_other(t)
+            for i in range(0, len(acts), self.max_batch):
+                self._run_acts(acts[i:i + self.max_batch])
+
+    def _run_other(self, t: _Task) -> None:
+        try:
+            if t.kind == "reset":
+                agent = self.factory()
+                agent.reset(t.payload)
+                self.sessions[t.session] = agent
+                self.sessions.move_to_end(t.session)
+                while len(self.sessions) > self.max_sessions:  # forget the least recently used
+                    self.sessions.popitem(last=False)
+                self.stats["resets"] += 1
+            else:
+                agent = self.sessions.pop(t.session, None)
+                if agent is not None and callable(getattr(agent, "close", None)):
+                    agent.close()
+            t.result = {}
+        except Exception as err:  # the user's agent failed: the client gets the reason
+            t.status, t.error = 500, f"{t.kind}() raised {_describe(err)}"
+        t.done.set()
+
+    def _run_acts(self, batch: list[_Task]) -> None:
+        live = []
+        for t in batch:
+            agent = self.sessions.get(t.session)
+            if agent is None:
+                t.status, t.error = 404, (f"unknown session {t.session!r}: POST /reset first (the server "
+                                          f"may have restarted or dropped the session)")
+                t.done.set()
+            else:
+                self.sessions.move_to_end(t.session)
+                live.append((t, agent))
+        if not live:
+            return
+        self.stats["batches"] += 1
+        self.stats["acts"] += len(live)
+        self.stats["largest_batch"] = max(self.stats["largest_batch"], len(live))
+        if self.batch_hook and len(live) > 1:
+            try:
+                actions = self.batch([a for _, a in live], [t.payload for t, _ in live])
+                if not isinstance(actions, (list, tuple)) or len(actions) != len(live):
+                    raise AgentError(f"act_batch() returned {type(actions).__name__} of "
+                                     f"{len(actions) if hasattr(actions, '__len__') else '?'} actions "
+                                     f"for {len(live)} observations")
+                results = [(a, None) for a in actions]
+            except Exception as err:
+                results = [(None, err)] * len(live)
+        else:
+            results = []
+            for t, agent in live:
+                try:
+                    results.append((agent.act(t.payload), None))
+                except Exception as err:
+                    results.append((None, err))
+        for (t, _), (action, err) in zip(live, results):
+            if err is None:
+                try:
+                    t.result = {"action": encode_action(validate_action(action))}
+                except (AgentError, ProtocolError) as bad:
+                    t.status, t.error = 422, str(bad)
+            elif isinstance(err, AgentError):
+                t.status, t.error = 422, str(err)
+            else:
+                t.status, t.error = 500, f"act() raised {_describe(err)}"
+            t.done.set()
+
+
+class _Handler(BaseHTTPRequestHandler):
+    """HTTP/1.1 keep-alive handler; every answer is a protocol message."""
+
+    protocol_version = "HTTP/1.1"
+    disable_nagle_algorithm = True  # headers and body are separate writes: no 40 ms delayed-ACK stalls
+    owner: AgentServer
+
+    def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 - quiet by default
+        pass
+
+    def _send(self, status: int, body: bytes) -> None:
+        self.send_response(status)
+        self.send_header("Content-Type", "application/json")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    def _error(self, status: int, text: str) -> None:
+        self._send(status, message(error=text))
+
+    def do_GET(self) -> None:  # noqa: N802 - http.server's naming
+        if self.path.split("?")[0] != "/info":
+            return self._error(404, f"no such endpoint GET {self.path} (use GET /info)")
+        self._send(200, message(**self.owner.info()))
+
+    def do_POST(self) -> None:  # noqa: N802
+        path = self.path.split("?")[0]
+        if path not in ("/reset", "/act", "/close"):
+            return self._error(404, f"no such endpoint POST {self.path} (use /reset, /act, /close)")
+        try:
+            length = int(self.headers.get("Content-Length", "-1"))
+        except ValueError:
+            length = -1
+        if not 0 <= length <= MAX_BODY:
+            self.close_connection = True
+            return self._error(400, f"a body of 0 to {MAX_BODY} bytes with Content-Length is required")
+        try:
+            doc = json.loads(self.rfile.read(length))
+            if not isinstance(doc, dict):
+                raise ProtocolError("the body must be a JSON object")
+            if doc.get("protocol") != PROTOCOL:
+                raise ProtocolError(f"protocol {doc.get('protocol')!r} is not {PROTOCOL!r}")
+            session = doc.get("session")
+            if not isinstance(session, str) or not 1 <= len(session) <= 128:
+                raise ProtocolError("session must be a string of 1 to 128 characters")
+            kind = path[1:]
+            payload = decode_info(doc.get("info")) if kind == "reset" else \
+                decode_obs(doc.get("obs")) if kind == "act" else None
+        except (ValueError, ProtocolError) as err:
+            return self._error(400, f"malformed request: {err}")
+        task = self.owner.submit(_Task(kind, session, payload))
+        if task.status != 200:
+            return self._error(task.status, task.error)
+        self._send(200, message(**task.result))
+
+
+def serve(spec: str, host: str = "127.0.0.1", port: int = 8765, max_batch: int = 8) -> None:
+    """Serve ``spec`` until interrupted (the ``icrsumo serve-agent`` command)."""
+    server = AgentServer(spec, host, port, max_batch)
+    print(f"icrsumo: serving agent {server.name!r} ({spec}) on {server.url} (protocol {PROTOCOL}, "
+          f"{'act_batch' if server.batch_hook else 'act per session'}, max batch {max_batch}); "
+          f"Ctrl-C stops", file=sys.stderr, flush=True)
+    t0 = time.perf_counter()
+
+    def stop(signum, frame):
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, stop)
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.shutdown()
+        s = server.stats
+        print(f"icrsumo: served {s['acts']} actions in {s['batches']} batches (largest {s['largest_batch']}) "
+              f"over {s['resets']} episodes in {time.perf_counter() - t0:.0f} s", file=sys.stderr)

@@ -1,0 +1,1 @@
+"""Learned language-conditioned BEV agents: data collection, text encoders, models, training."""

@@ -1,0 +1,105 @@
+"""Learned agents: drive from the BEV raster, the speed and the instruction text alone.
+
+A :class:`LearnedAgent` runs a :class:`icrsumo.learn.nets.Policy` (one per checkpoint and
+process, loaded on first use with ``weights_only=True``) on each observation and hands its
+waypoints and target speed to the built-in controller; a stop probability above 0.5 sets the
+target speed to 0. Its only memory is the time it has been stopped
+(:class:`icrsumo.learn.labels.StopClock`). ``act_batch`` runs several episodes' observations in
+one forward pass per checkpoint (:func:`act_batch`, used by batched serving).
+
+Shipped checkpoints live in ``icrsumo/learn/checkpoints/<name>.pt`` with a model card
+``<name>.md`` and the config ``<name>.toml`` that produced them.
+"""
+
+from __future__ import annotations
+
+import os
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+from ..agents.base import Action, EpisodeInfo, Observation
+from .labels import StopClock
+
+CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
+
+
+#: environment variable naming the inference device of learned agents (cpu, cuda, auto)
+DEVICE_ENV = "ICRSUMO_AGENT_DEVICE"
+
+
+@cache
+def _policy(path: str):
+    from .nets import Policy
+
+    return Policy(Path(path), device=os.environ.get(DEVICE_ENV, "cpu"))
+
+
+class LearnedAgent:
+    """A non-privileged agent around a checkpoint (``checkpoint``: a path)."""
+
+    name = "learned"
+    privileged = False
+    checkpoint: str = ""
+
+    def __init__(self, checkpoint: str | Path | None = None) -> None:
+        path = Path(checkpoint or self.checkpoint)
+        if not path.is_absolute() and not path.is_file():
+            path = CHECKPOINTS / path
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: agent checkpoint not found")
+        self.path = str(path)
+        self.policy = _policy(self.path)
+        self.clock = StopClock()
+
+    def reset(self, info: EpisodeInfo) -> None:
+        self.clock = StopClock()
+
+    def act(self, obs: Observation) -> Action:
+        return act_batch([self], [obs])[0]
+
+    #: batched-inference hook (``act_batch(agents, observations)``) used by serve-agent
+    act_batch = staticmethod(lambda agents, batch: act_batch(agents, batch))
+
+
+def act_batch(agents: list[LearnedAgent], batch: list[Observation]) -> list[Action]:
+    """Actions of several episodes' agents (``agents[i]`` sees ``batch[i]``) with one forward
+    pass per checkpoint: the batched-inference hook of ``icrsumo serve-agent`` and of
+    parallel evaluation. Each agent keeps its own stop clock."""
+    actions: list[Action | None] = [None] * len(batch)
+    groups: dict[str, list[int]] = {}
+    for i, a in enumerate(agents):
+        groups.setdefault(a.path, []).append(i)
+    for path, idx in groups.items():
+        policy = _policy(path)
+        obs = [batch[i] for i in idx]
+        stopped = np.array([agents[i].clock.update(o.t, o.speed) for i, o in zip(idx, obs)], dtype=np.float32)
+        out = policy(np.stack([o.bev for o in obs]),
+                     [o.instruction for o in obs],
+                     np.array([o.speed for o in obs], dtype=np.float32), stopped)
+        for i, wps, v, p in zip(idx, out["waypoints"], out["speed"], out["stop_prob"]):
+            target = 0.0 if p > 0.5 else float(max(v, 0.0))
+            actions[i] = Action(waypoints=wps.astype(np.float64), target_speed=target)
+    return actions  # type: ignore[return-value]
+
+
+class TokenAgent(LearnedAgent):
+    """``bev-token``: word-token GRU language encoder, trained on baseline phrasings only."""
+
+    name = "bev-token"
+    checkpoint = "bev-token.pt"
+
+
+class NgramAgent(LearnedAgent):
+    """``bev-ngram``: hashed character n-gram language encoder, baseline phrasings only."""
+
+    name = "bev-ngram"
+    checkpoint = "bev-ngram.pt"
+
+
+class NgramAugAgent(LearnedAgent):
+    """``bev-ngram-aug``: as ``bev-ngram``, trained with ``--augment-instructions``."""
+
+    name = "bev-ngram-aug"
+    checkpoint = "bev-ngram-aug.pt"

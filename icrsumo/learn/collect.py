@@ -1,0 +1,270 @@
+"""``icrsumo collect``: expert driving data for the learned agents, from the ``train`` split only.
+
+The expert is the route-oracle (it knows the route). On every agent step (10 Hz) it plans from
+the current state; its plan, resampled at :data:`icrsumo.learn.labels.ARC_M`, and its target
+speed are the labels. On perturbed passes the executed action is disturbed now and then (the
+start too): the waypoints are shifted sideways or rotated for 0.3-1.5 s, or the speed is scaled
+for 1-3 s, so the ego leaves the lane centre, and the expert's labels from those states say how
+to get back (recovery data, as in DAgger-style noise injection).
+
+Instructions: each pass draws its own phrasings of the route's baseline sequence from the
+baseline bank (seed from ``--seed``, the route id and the pass); the evaluation banks
+(paraphrase, ambiguity, noise, misleading) are never read.
+
+Layout of OUT (resumable: finished episodes are kept and skipped on a rerun):
+
+    OUT/scenarios/                 convert-routes output of the split
+    OUT/episodes/<route>__p<k>.npz one file per (route, pass), written atomically
+    OUT/collect.json               options and the episode list (written last)
+
+Each ``.npz`` holds ``bev`` (N, C, H, W/8) uint8 bit-packed raster (``numpy.unpackbits`` along
+the last axis restores 0/1), ``speed`` (N,) m/s, ``instruction`` (N,) int16 index into
+``instructions`` (a JSON list of the episode's instructions: text as shown, type, intent, slots;
+-1 before the first), ``waypoints`` (N, K, 2) m ego frame, ``target_speed`` (N,) m/s,
+``perturbed`` (N,) uint8, ``t`` (N,) s and ``stopped_for`` (N,) s (time since the ego
+stopped, 0 while moving; see :class:`icrsumo.learn.labels.StopClock`).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import sys
+import zlib
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..agents.base import Action, Observation
+from ..agents.privileged import RouteOracle
+from ..convert import ConvertOptions, convert_routes, safe_name
+from ..errors import InputError
+from ..fsio import dumps_json, write_atomic
+from ..instructions.banks import load_banks
+from ..instructions.generate import baseline_set
+from ..resources import bundled_suites
+from ..scenario import find_scenarios, read_scenario
+from ..types import Instruction
+from .augment import instruction_slots
+from .labels import StopClock, resample_path
+
+COLLECT_FORMAT = "icrsumo-collect/1"
+#: bundled splits that hold evaluation routes: never collected from
+EVAL_SPLITS = ("tiny", "short", "long")
+#: chance per agent step (10 Hz) that a perturbation starts on a perturbed pass
+P_START = 0.04
+
+
+@dataclass(frozen=True)
+class CollectOptions:
+    """What to collect: ``passes`` per route (pass 0 clean, the others perturbed), every
+    ``every``-th agent step stored, background ``traffic`` level, ``limit`` routes (0: all).
+    ``driver``: a learned agent (name or checkpoint) that drives instead of the expert while the
+    expert still labels every frame (DAgger); no perturbations then."""
+
+    suite: str = "train"
+    passes: int = 3
+    seed: int = 0
+    every: int = 2
+    traffic: str = "normal"
+    workers: int = 1
+    limit: int = 0
+    driver: str = ""
+
+    def check(self) -> None:
+        if self.suite in EVAL_SPLITS:
+            raise InputError("--suite", self.suite, "is an evaluation split",
+                             "collect from the train split (the default) or your own routes")
+        if not 1 <= self.passes <= 32:
+            raise InputError("--passes", "", f"{self.passes} out of range", "use 1 to 32")
+        if not 1 <= self.every <= 50:
+            raise InputError("--every", "", f"{self.every} out of range", "use 1 to 50")
+        if self.workers < 1:
+            raise InputError("--workers", "", "must be at least 1", "give a positive count")
+
+
+class Collector(RouteOracle):
+    """The route-oracle that records (BEV, speed, instruction, its own plan) and, when
+    ``perturb`` is set, executes a disturbed version of its plan now and then."""
+
+    name = "collector"
+
+    def __init__(self, rng: np.random.Generator, perturb: bool, every: int, driver: object = None) -> None:
+        super().__init__()
+        self.rng, self.perturb, self.every, self.driver = rng, perturb, every, driver
+        self.rows: dict[str, list] = {k: [] for k in ("bev", "speed", "instruction", "waypoints",
+                                                       "target_speed", "perturbed", "t", "stopped_for")}
+        self._n = 0
+        self._clock = StopClock()
+        self._left = 0
+        self._kind = ""
+        self._value = 0.0
+
+    def act(self, obs: Observation) -> Action:
+        label = super().act(obs)
+        stopped_for = self._clock.update(obs.t, obs.speed)
+        if self.perturb:
+            self._schedule()
+        if self._n % self.every == 0:
+            r = self.rows
+            r["bev"].append(np.packbits(obs.bev > 0, axis=-1))
+            r["speed"].append(obs.speed)
+            r["instruction"].append(obs.instruction_id)
+            r["waypoints"].append(resample_path(label.waypoints))
+            r["target_speed"].append(label.target_speed or 0.0)
+            r["perturbed"].append(1 if self._left > 0 else 0)
+            r["t"].append(obs.t)
+            r["stopped_for"].append(stopped_for)
+        self._n += 1
+        if self.driver is not None:
+            return self.driver.act(replace(obs, world=None))
+        return self._disturb(label)
+
+    def reset(self, info) -> None:
+        super().reset(info)
+        if self.driver is not None:
+            self.driver.reset(info)
+
+    def _schedule(self) -> None:
+        rng = self.rng
+        if self._left > 0:
+            return
+        if not (self._n == 0 and rng.random() < 0.7) and not rng.random() < P_START:
+            return
+        kind = ("shift", "turn", "speed")[int(rng.integers(3))] if self._n else "shift"
+        sign = 1.0 if rng.random() < 0.5 else -1.0
+        if kind == "shift":
+            self._value, self._left = sign * rng.uniform(0.8, 2.5), int(rng.integers(5, 16))
+        elif kind == "turn":
+            self._value, self._left = sign * rng.uniform(0.08, 0.3), int(rng.integers(3, 9))
+        else:
+            self._value, self._left = rng.uniform(0.3, 1.4), int(rng.integers(10, 31))
+        self._kind = kind
+
+    def _disturb(self, a: Action) -> Action:
+        if self._left <= 0:
+            return a
+        self._left -= 1
+        wps = np.asarray(a.waypoints, dtype=float)
+        if self._kind == "shift":
+            return Action(waypoints=wps + np.array([0.0, self._value]), target_speed=a.target_speed)
+        if self._kind == "turn":
+            c, s = np.cos(self._value), np.sin(self._value)
+            return Action(waypoints=wps @ np.array([[c, s], [-s, c]]), target_speed=a.target_speed)
+        return Action(waypoints=wps, target_speed=(a.target_speed or 0.0) * self._value)
+
+
+def _instruction_doc(ins: Instruction) -> dict:
+    return {"id": ins.id, "text": ins.rendered(), "type": ins.type, "intent": ins.intent.value,
+            "distance": ins.distance, "slots": instruction_slots(ins)}
+
+
+def episode_rng(seed: int, route_id: str, pass_k: int) -> np.random.Generator:
+    """The Generator of one (route, pass): phrasings and perturbations."""
+    return np.random.default_rng([seed, zlib.crc32(route_id.encode("utf-8")), pass_k])
+
+
+def collect_episode(scenario_dir: str, pass_k: int, opts: CollectOptions) -> tuple[bytes, dict]:
+    """Drive one (route, pass); returns the ``.npz`` bytes and a summary dict."""
+    from ..runner import run_episode
+
+    sc = read_scenario(Path(scenario_dir))
+    rng = episode_rng(opts.seed, sc.route_id, pass_k)
+    phrasing_seed = int(rng.integers(2**31))
+    iset, _ = baseline_set(sc, load_banks(None), phrasing_seed)
+    driver = None
+    if opts.driver:
+        from ..agents.registry import BUILTIN
+        from .agent import LearnedAgent
+
+        cls = BUILTIN.get(opts.driver)
+        driver = cls() if cls is not None else LearnedAgent(opts.driver)
+    agent = Collector(rng, perturb=pass_k > 0 and driver is None, every=opts.every, driver=driver)
+    log = run_episode(sc, iset, agent)
+    r = agent.rows
+    arrays = {
+        "bev": np.stack(r["bev"]).astype(np.uint8),
+        "speed": np.asarray(r["speed"], dtype=np.float32),
+        "instruction": np.asarray(r["instruction"], dtype=np.int16),
+        "waypoints": np.stack(r["waypoints"]).astype(np.float32),
+        "target_speed": np.asarray(r["target_speed"], dtype=np.float32),
+        "perturbed": np.asarray(r["perturbed"], dtype=np.uint8),
+        "t": np.asarray(r["t"], dtype=np.float32),
+        "stopped_for": np.asarray(r["stopped_for"], dtype=np.float32),
+        "instructions": np.asarray(json.dumps([_instruction_doc(i) for i in iset.instructions])),
+    }
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    summary = {"route_id": sc.route_id, "pass": pass_k, "frames": len(r["speed"]),
+               "termination": log.termination,
+               "progress": round(log.progress[-1] if log.progress else 0.0, 1)}
+    return buf.getvalue(), summary
+
+
+def _job(args: tuple[str, int, CollectOptions, str]) -> dict:
+    d, k, opts, path = args
+    data, summary = collect_episode(d, k, opts)
+    write_atomic(Path(path), data)
+    return summary
+
+
+def _scenarios(opts: CollectOptions, out: Path) -> Path:
+    p = Path(opts.suite)
+    if p.is_dir() and (p / "index.json").is_file():
+        return p
+    routes = bundled_suites().get(opts.suite, p)
+    if not Path(routes).is_file():
+        raise InputError(opts.suite, "", "no such route file or bundled split",
+                         "use train (the default) or a route XML file")
+    report = convert_routes(routes, out / "scenarios", ConvertOptions(traffic=opts.traffic,
+                                                                     workers=opts.workers))
+    for line in report.failures:
+        print(f"icrsumo: skipped: {line}", file=sys.stderr)
+    return out / "scenarios"
+
+
+def collect(opts: CollectOptions, out: Path, quiet: bool = False) -> dict:
+    """Collect (or resume collecting) into ``out``; returns the manifest written to
+    ``out/collect.json``."""
+    opts.check()
+    out = Path(out)
+    config = {k: v for k, v in asdict(opts).items() if k not in ("workers",)}
+    manifest_path = out / "collect.json"
+    if manifest_path.is_file():
+        old = json.loads(manifest_path.read_text(encoding="utf-8")).get("config", {})
+        if old != config:
+            raise InputError(manifest_path, "config", "holds data of a different configuration",
+                             "use another --out folder, or the same options")
+    dirs = find_scenarios(_scenarios(opts, out))
+    if opts.limit:
+        dirs = dirs[: opts.limit]
+    episodes = out / "episodes"
+    episodes.mkdir(parents=True, exist_ok=True)
+    jobs, names = [], []
+    for d in dirs:
+        rid = read_scenario(d).route_id
+        for k in range(opts.passes):
+            path = episodes / f"{safe_name(rid)}__p{k}.npz"
+            names.append(path.name)
+            if not path.is_file():
+                jobs.append((str(d), k, opts, str(path)))
+    if jobs and not quiet:
+        print(f"icrsumo collect: {len(jobs)} episodes to drive ({len(names) - len(jobs)} kept)",
+              file=sys.stderr)
+    if opts.workers > 1 and len(jobs) > 1:
+        with ProcessPoolExecutor(max_workers=min(opts.workers, len(jobs))) as pool:
+            for i, _ in enumerate(pool.map(_job, jobs), 1):
+                if not quiet and i % 20 == 0:
+                    print(f"icrsumo collect: {i}/{len(jobs)}", file=sys.stderr)
+    else:
+        for job in jobs:
+            _job(job)
+    frames = 0
+    for name in names:
+        with np.load(episodes / name) as z:
+            frames += int(z["speed"].shape[0])
+    manifest = {"format": COLLECT_FORMAT, "config": config, "frames": frames, "episodes": names}
+    write_atomic(manifest_path, dumps_json(manifest))
+    return manifest

@@ -1,0 +1,307 @@
+"""Torch models of the learned agents, their checkpoints and one training step; the only
+module of the package that imports torch.
+
+Model (``BevLanguageNet``): a small CNN encodes the BEV raster ``(B, 7, 128, 128)`` (0/1
+floats); a language encoder maps the instruction ids ``(B, L)`` to a 128-d vector, which
+modulates the CNN's 8x8 feature map (FiLM) and joins the pooled BEV feature, the speed (m/s)
+and the stopped time (s) in an MLP. Heads: ``waypoints`` ``(B, K, 2)`` m in the ego frame at
+the arc lengths of :data:`icrsumo.learn.labels.ARC_M`, ``speed`` ``(B,)`` target speed m/s,
+``stop`` ``(B,)`` logit of "target speed below 0.3 m/s", and ``intent`` ``(B, 6)`` logits of
+the instruction's intent (an auxiliary loss that grounds the language vector).
+
+Language encoders: ``token`` (word embeddings + bidirectional GRU, vocabulary of the
+training instructions) and ``ngram`` (hashed character n-gram embeddings, masked mean, MLP).
+
+Checkpoints are plain dicts of tensors, strings and numbers, read with
+``torch.load(..., weights_only=True)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from .labels import ARC_M, STOP_BELOW
+from .text import TextEncoder
+
+CHECKPOINT_FORMAT = "icrsumo-agent/1"
+#: intents of the auxiliary head (the baseline's; others map to follow)
+INTENTS = ("follow", "left", "right", "straight", "lane_left", "lane_right")
+_ARC = torch.tensor(ARC_M, dtype=torch.float32)
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Architecture: language ``encoder`` (token / ngram), ids per text ``text_len``, hash
+    ``buckets`` (ngram), ``vocab`` (token), embedding size ``embed``, language vector ``lang``,
+    CNN base width ``width``, MLP width ``hidden``."""
+
+    encoder: str = "ngram"
+    text_len: int = 160
+    buckets: int = 8192
+    vocab: tuple[str, ...] = field(default=())
+    embed: int = 64
+    lang: int = 128
+    width: int = 32
+    hidden: int = 256
+
+    def text_encoder(self) -> TextEncoder:
+        return TextEncoder(self.encoder, self.text_len, self.vocab, self.buckets)
+
+
+class _TokenEncoder(nn.Module):
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        self.emb = nn.Embedding(len(cfg.vocab), cfg.embed, padding_idx=0)
+        self.gru = nn.GRU(cfg.embed, cfg.lang // 2, batch_first=True, bidirectional=True)
+
+    def forward(self, ids: torch.Tensor) -> torch.Tensor:
+        lengths = (ids > 0).sum(1).clamp(min=1).cpu()
+        packed = nn.utils.rnn.pack_padded_sequence(self.emb(ids), lengths, batch_first=True,
+                                                   enforce_sorted=False)
+        _, h = self.gru(packed)                     # (2, B, lang/2)
+        return torch.cat([h[0], h[1]], dim=1)
+
+
+class _NgramEncoder(nn.Module):
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        self.emb = nn.Embedding(cfg.buckets, cfg.embed, padding_idx=0)
+        self.mlp = nn.Sequential(nn.Linear(cfg.embed, cfg.lang), nn.ReLU(), nn.Linear(cfg.lang, cfg.lang))
+
+    def forward(self, ids: torch.Tensor) -> torch.Tensor:
+        mask = (ids > 0).unsqueeze(-1).float()
+        mean = (self.emb(ids) * mask).sum(1) / mask.sum(1).clamp(min=1.0)
+        return self.mlp(mean)
+
+
+class BevLanguageNet(nn.Module):
+    """BEV CNN + language encoder + FiLM fusion + waypoint / speed / stop / intent heads."""
+
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        w = cfg.width
+        self.cfg = cfg
+        self.lang = _TokenEncoder(cfg) if cfg.encoder == "token" else _NgramEncoder(cfg)
+        self.stem = nn.Conv2d(7, w, 4, stride=4)                       # 128 -> 32
+        self.c2 = nn.Conv2d(w, 2 * w, 3, stride=2, padding=1)          # 32 -> 16
+        self.c3 = nn.Conv2d(2 * w, 4 * w, 3, stride=2, padding=1)      # 16 -> 8
+        self.film = nn.Linear(cfg.lang, 8 * w)
+        self.c4 = nn.Conv2d(4 * w, 4 * w, 3, stride=2, padding=1)      # 8 -> 4
+        self.fc = nn.Linear(4 * w * 16, cfg.hidden)
+        self.mlp = nn.Sequential(nn.Linear(cfg.hidden + cfg.lang + 2, cfg.hidden), nn.ReLU(),
+                                 nn.Linear(cfg.hidden, cfg.hidden), nn.ReLU())
+        self.head = nn.Linear(cfg.hidden, 2 * len(ARC_M) + 2)
+        self.intent = nn.Linear(cfg.lang, len(INTENTS))
+
+    def forward(self, bev: torch.Tensor, ids: torch.Tensor, speed: torch.Tensor,
+                stopped: torch.Tensor) -> dict[str, torch.Tensor]:
+        return self.fuse(bev, self.lang(ids), speed, stopped)
+
+    def fuse(self, bev: torch.Tensor, lang: torch.Tensor, speed: torch.Tensor,
+             stopped: torch.Tensor) -> dict[str, torch.Tensor]:
+        """The forward pass from an already encoded language vector ``lang`` (B, lang)."""
+        x = F.relu(self.stem(bev))
+        x = F.relu(self.c2(x))
+        x = self.c3(x)
+        gamma, beta = self.film(lang).chunk(2, dim=1)
+        x = F.relu(x * (1 + gamma[:, :, None, None]) + beta[:, :, None, None])
+        x = F.relu(self.c4(x))
+        x = F.relu(self.fc(x.flatten(1)))
+        h = self.mlp(torch.cat([x, lang, (speed / 10.0)[:, None], (stopped / 5.0)[:, None]], dim=1))
+        out = self.head(h)
+        k = len(ARC_M)
+        wps = out[:, : 2 * k].view(-1, k, 2)
+        wps = torch.stack([wps[..., 0] + _ARC.to(wps.device), wps[..., 1]], dim=-1)
+        return {"waypoints": wps, "speed": out[:, 2 * k] * 10.0, "stop": out[:, 2 * k + 1],
+                "intent": self.intent(lang)}
+
+
+def unpack_bev(packed: torch.Tensor) -> torch.Tensor:
+    """``(B, C, H, W/8)`` uint8 bit-packed rasters -> ``(B, C, H, W)`` float 0/1 (on the same
+    device as ``packed``; bit order as ``numpy.packbits``)."""
+    shifts = torch.arange(7, -1, -1, device=packed.device, dtype=torch.uint8)
+    bits = (packed.unsqueeze(-1) >> shifts) & 1
+    return bits.flatten(-2).float()
+
+
+def build_model(cfg: ModelConfig, seed: int) -> BevLanguageNet:
+    """A freshly initialised model; initial weights depend only on ``seed`` (the global torch
+    RNG is forked and restored, so the caller's random state is left alone)."""
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        return BevLanguageNet(cfg)
+
+
+def losses(out: dict[str, torch.Tensor], batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """Training losses: L1 on waypoints (m), L1 on target speed (m/s), BCE on stop, CE on
+    intent; ``total`` is their weighted sum."""
+    wp = (out["waypoints"] - batch["waypoints"]).abs().mean()
+    sp = (out["speed"] - batch["target_speed"]).abs().mean()
+    stop = F.binary_cross_entropy_with_logits(out["stop"], (batch["target_speed"] < STOP_BELOW).float())
+    intent = F.cross_entropy(out["intent"], batch["intent"])
+    return {"total": wp + 0.2 * sp + 0.5 * stop + 0.2 * intent, "waypoints": wp, "speed": sp,
+            "stop": stop, "intent": intent}
+
+
+def pick_device(name: str = "auto") -> torch.device:
+    """``auto``: CUDA when available, else CPU."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(name)
+
+
+class Trainer:
+    """Model + AdamW + step counter on ``device``; saves and resumes its whole state."""
+
+    def __init__(self, cfg: ModelConfig, seed: int, lr: float, weight_decay: float, steps: int,
+                 device: torch.device) -> None:
+        self.cfg, self.device, self.steps = cfg, device, steps
+        self.model = build_model(cfg, seed).to(device)
+        self.opt = torch.optim.AdamW(self.model.parameters(), lr=lr, weight_decay=weight_decay)
+        self.sched = torch.optim.lr_scheduler.OneCycleLR(self.opt, max_lr=lr, total_steps=max(steps, 2),
+                                                         pct_start=0.05)
+        self.step = 0
+
+    def to_device(self, batch: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
+        out = {k: torch.from_numpy(np.ascontiguousarray(v)).to(self.device, non_blocking=True)
+               for k, v in batch.items()}
+        if out["bev"].dtype == torch.uint8:
+            out["bev"] = unpack_bev(out["bev"])
+        return out
+
+    def train_step(self, batch: dict[str, torch.Tensor]) -> dict[str, float]:
+        self.model.train()
+        out = self.model(batch["bev"], batch["ids"], batch["speed"], batch["stopped_for"])
+        loss = losses(out, batch)
+        self.opt.zero_grad(set_to_none=True)
+        loss["total"].backward()
+        nn.utils.clip_grad_norm_(self.model.parameters(), 5.0)
+        self.opt.step()
+        if self.step < self.steps - 1:
+            self.sched.step()
+        self.step += 1
+        return {k: float(v.detach()) for k, v in loss.items()}
+
+    @torch.no_grad()
+    def evaluate(self, batch: dict[str, torch.Tensor]) -> dict[str, float]:
+        self.model.eval()
+        out = self.model(batch["bev"], batch["ids"], batch["speed"], batch["stopped_for"])
+        loss = losses(out, batch)
+        res = {k: float(v) for k, v in loss.items()}
+        stop_true = batch["target_speed"] < STOP_BELOW
+        res["stop_acc"] = float(((out["stop"] > 0) == stop_true).float().mean())
+        res["intent_acc"] = float((out["intent"].argmax(1) == batch["intent"]).float().mean())
+        res["final_wp_err"] = float((out["waypoints"][:, -1] - batch["waypoints"][:, -1]).norm(dim=-1).mean())
+        return res
+
+    def state(self, extra: dict) -> dict:
+        return {"format": CHECKPOINT_FORMAT + "+train", "config": _cfg_dict(self.cfg), "step": self.step,
+                "model": self.model.state_dict(), "opt": self.opt.state_dict(),
+                "sched": self.sched.state_dict(), **extra}
+
+    def load_state(self, state: dict) -> None:
+        self.model.load_state_dict(state["model"])
+        self.opt.load_state_dict(state["opt"])
+        self.sched.load_state_dict(state["sched"])
+        self.step = int(state["step"])
+
+
+def _cfg_dict(cfg: ModelConfig) -> dict:
+    d = asdict(cfg)
+    d["vocab"] = list(cfg.vocab)
+    return d
+
+
+def config_from_dict(d: dict) -> ModelConfig:
+    d = dict(d)
+    d["vocab"] = tuple(d.get("vocab", ()))
+    return ModelConfig(**d)
+
+
+def save(obj: dict, path: Path) -> None:
+    """Write ``obj`` with torch.save atomically (temporary file, then rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(obj, tmp)
+    tmp.replace(path)
+
+
+def load(path: Path) -> dict:
+    """Read a checkpoint with ``weights_only=True`` (no code runs from the file)."""
+    return torch.load(Path(path), map_location="cpu", weights_only=True)
+
+
+def export(trainer: Trainer, path: Path, meta: dict) -> None:
+    """The inference checkpoint: format, config, float32 weights and ``meta`` (data, steps)."""
+    weights = {k: v.detach().to("cpu", torch.float32) if v.is_floating_point() else v.detach().cpu()
+               for k, v in trainer.model.state_dict().items()}
+    save({"format": CHECKPOINT_FORMAT, "config": _cfg_dict(trainer.cfg), "model": weights,
+          "meta": meta}, path)
+
+
+class Policy:
+    """Inference wrapper of an exported checkpoint (``torch.inference_mode``) on ``device``
+    (``cpu``, ``cuda`` or ``auto``). The language vector of each distinct instruction text is
+    computed once and cached. On CPU a batch runs sample by sample, so that results are
+    bitwise those of single calls; on a GPU it runs in one pass (equal to float rounding)."""
+
+    def __init__(self, path: Path, threads: int | None = 1, device: str = "cpu") -> None:
+        ck = load(path)
+        if ck.get("format") != CHECKPOINT_FORMAT:
+            raise ValueError(f"{path}: not an icrsumo agent checkpoint (format {ck.get('format')!r})")
+        if threads:
+            torch.set_num_threads(threads)
+        self.cfg = config_from_dict(ck["config"])
+        self.meta = ck.get("meta", {})
+        self.model = BevLanguageNet(self.cfg)
+        self.model.load_state_dict(ck["model"])
+        self.model.eval()
+        self.device = pick_device(device)
+        self.model.to(self.device)
+        self.text = self.cfg.text_encoder()
+        self._lang: dict[str, torch.Tensor] = {}
+
+    def language(self, texts: list[str]) -> torch.Tensor:
+        """``(B, lang)`` language vectors of ``texts`` (cached per text)."""
+        missing = [t for t in dict.fromkeys(texts) if t not in self._lang]
+        if missing:
+            with torch.inference_mode():
+                vecs = self.model.lang(torch.from_numpy(self.text.encode_many(missing)).to(self.device))
+            if len(self._lang) > 4096:
+                self._lang.clear()
+            self._lang.update(zip(missing, vecs))
+        return torch.stack([self._lang[t] for t in texts])
+
+    def __call__(self, bev: np.ndarray, texts: list[str], speed: np.ndarray,
+                 stopped: np.ndarray) -> dict[str, np.ndarray]:
+        """Batched forward: ``bev`` (B, 7, H, W) uint8 0/255, instruction ``texts`` (B),
+        ``speed`` (m/s) and ``stopped`` (s) (B,) -> numpy ``waypoints`` (B, K, 2) m,
+        ``speed`` (B,) m/s, ``stop_prob`` (B,)."""
+        lang = self.language(texts)
+        dev = self.device
+        speed = torch.from_numpy(np.asarray(speed, dtype=np.float32)).to(dev)
+        stopped = torch.from_numpy(np.asarray(stopped, dtype=np.float32)).to(dev)
+        with torch.inference_mode():
+            b = torch.from_numpy(np.ascontiguousarray(bev)).to(dev).float().mul_(1.0 / 255.0)
+            if dev.type == "cpu":
+                # one sample at a time: bitwise the same as acting alone (CPU kernels may round
+                # differently for other batch sizes); batching pays off on a GPU only
+                outs = [self.model.fuse(b[i:i + 1], lang[i:i + 1], speed[i:i + 1], stopped[i:i + 1])
+                        for i in range(len(b))]
+                out = {k: torch.cat([o[k] for o in outs]) for k in outs[0]}
+            else:
+                out = self.model.fuse(b, lang, speed, stopped)
+            return {"waypoints": out["waypoints"].cpu().numpy(), "speed": out["speed"].cpu().numpy(),
+                    "stop_prob": torch.sigmoid(out["stop"]).cpu().numpy()}
+
+
+def parameter_count(model: nn.Module) -> int:
+    return sum(p.numel() for p in model.parameters())
+

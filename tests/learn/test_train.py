@@ -1,0 +1,84 @@
+"""Training on CPU: a few steps lower the loss; the CLI trains, exports and resumes."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from icrsumo.cli import main
+from icrsumo.learn import nets
+from icrsumo.learn.collect import CollectOptions, collect
+from icrsumo.learn.train import TrainConfig, load_dataset
+
+
+@pytest.fixture(scope="module")
+def tiny_data(converted, tmp_path_factory):
+    out = tmp_path_factory.mktemp("collected")
+    collect(CollectOptions(suite=str(converted["tiny"]), passes=2, every=4, limit=2), out, quiet=True)
+    return out
+
+
+def test_few_cpu_steps_lower_the_loss(tiny_data):
+    ds = load_dataset(tiny_data)
+    cfg = nets.ModelConfig(encoder="ngram", text_len=64, buckets=1024, width=8, hidden=64)
+    enc = cfg.text_encoder()
+    idx = np.arange(0, len(ds.speed), max(1, len(ds.speed) // 64))
+    ids = enc.encode_many([ds.docs[d]["text"] for d in ds.doc[idx]])
+    intents = [nets.INTENTS.index(ds.docs[d]["intent"]) if ds.docs[d]["intent"] in nets.INTENTS else 0
+               for d in ds.doc[idx]]
+    trainer = nets.Trainer(cfg, seed=0, lr=3e-3, weight_decay=0.0, steps=40, device=torch.device("cpu"))
+    batch = trainer.to_device({"bev": ds.bev[idx], "ids": ids, "speed": ds.speed[idx],
+                               "stopped_for": ds.stopped_for[idx], "waypoints": ds.waypoints[idx],
+                               "target_speed": ds.target_speed[idx], "intent": np.array(intents)})
+    before = trainer.evaluate(batch)["total"]
+    for _ in range(25):
+        trainer.train_step(batch)
+    after = trainer.evaluate(batch)["total"]
+    assert after < 0.7 * before
+
+
+def test_initial_weights_depend_only_on_the_seed():
+    cfg = nets.ModelConfig(encoder="token", vocab=("<pad>", "<unk>", "left"), width=8, hidden=32)
+    state = torch.random.get_rng_state()
+    a, b = nets.build_model(cfg, 3), nets.build_model(cfg, 3)
+    assert torch.equal(torch.random.get_rng_state(), state)
+    for (ka, va), (_, vb) in zip(a.state_dict().items(), b.state_dict().items()):
+        assert torch.equal(va, vb), ka
+
+
+def test_cli_trains_exports_and_resumes(tiny_data, tmp_path, capsys):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('encoder = "token"\nsteps = 6\nbatch = 16\neval_every = 2\ncheckpoint_every = 2\n'
+                   'val_fraction = 0.3\nwidth = 8\nhidden = 32\ndevice = "cpu"\n')
+    out = tmp_path / "run"
+    assert main(["train", str(cfg), "--data", str(tiny_data), "--out", str(out), "--steps", "4"]) == 0
+    log = [json.loads(x) for x in (out / "train_log.jsonl").read_text().splitlines()]
+    assert [x["step"] for x in log] == [2, 4] and "val" in log[-1]
+    ck = torch.load(out / "model.pt", weights_only=True)
+    assert ck["format"] == nets.CHECKPOINT_FORMAT and ck["meta"]["steps"] == 4
+    # same config, more steps: refused (config differs); same config reruns from last.pt
+    assert main(["train", str(cfg), "--data", str(tiny_data), "--out", str(out), "--steps", "6"]) == 2
+    assert "different config" in capsys.readouterr().err
+    assert main(["train", str(cfg), "--data", str(tiny_data), "--out", str(out), "--steps", "4"]) == 0
+    assert [json.loads(x)["step"] for x in (out / "train_log.jsonl").read_text().splitlines()] == [2, 4]
+
+
+def test_bad_config_is_one_line_error(tmp_path, capsys):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text('encoder = "bert"\n')
+    assert main(["train", str(cfg), "--data", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "encoder" in err
+    cfg.write_text('stepz = 3\n')
+    assert main(["train", str(cfg), "--data", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    assert "unknown key" in capsys.readouterr().err
+
+
+def test_augmented_training_config(tiny_data):
+    from icrsumo.learn.train import text_pool
+
+    ds = load_dataset(tiny_data)
+    pool = text_pool(ds, TrainConfig(augment_instructions=True, variants=8), np.random.default_rng(0))
+    assert all(len(p) == 8 for p, d in zip(pool, ds.docs) if d["type"] != "none")
+    assert any(len(set(p)) > 3 for p in pool)

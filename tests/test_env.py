@@ -1,0 +1,148 @@
+"""The Gymnasium environment icrsumo/ICRDrive-v0: check_env, determinism, the same closed loop as
+run_episode, reward and metrics, and the README's example (run exactly as printed)."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+gym = pytest.importorskip("gymnasium")
+
+from gymnasium.utils.env_checker import check_env  # noqa: E402
+
+import icrsumo.env  # noqa: E402,F401 - registers the id
+from icrsumo.agents.base import Action, AgentError  # noqa: E402
+from icrsumo.dynamics import Control  # noqa: E402
+from icrsumo.logs import dumps_log  # noqa: E402
+from icrsumo.metrics import route_completion, score_episode  # noqa: E402
+from icrsumo.runner import run_episode  # noqa: E402
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    """One cache folder for the session (shared with test_user_agents.py), set for this module."""
+    path = tmp_path_factory.getbasetemp() / "icrsumo_cache"
+    old = os.environ.get("ICRSUMO_CACHE")
+    os.environ["ICRSUMO_CACHE"] = str(path)
+    yield path
+    if old is None:
+        os.environ.pop("ICRSUMO_CACHE", None)
+    else:
+        os.environ["ICRSUMO_CACHE"] = old
+
+
+def _policy(obs) -> np.ndarray:
+    """Hold about 6 m/s, straight ahead (representable exactly in float32)."""
+    return np.array([0.0, 0.5 if obs["speed"][0] < 6.0 else 0.0, 0.0], dtype=np.float32)
+
+
+class _Same:
+    """The same policy as an agent of the protocol, for the comparison with run_episode."""
+
+    name = "gymnasium"
+    privileged = False
+
+    def reset(self, info):
+        pass
+
+    def act(self, obs):
+        return Action(control=Control(steer=0.0, throttle=0.5 if np.float32(obs.speed) < 6.0 else 0.0,
+                                      brake=0.0))
+
+
+@pytest.mark.parametrize("kwargs", [{"render_mode": "rgb_array"},
+                                    {"action_type": "waypoints", "text_space": "bytes"}])
+def test_check_env_passes(cache, kwargs):
+    env = gym.make("icrsumo/ICRDrive-v0", **kwargs)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env.unwrapped)
+    env.close()
+    msgs = [str(w.message) for w in caught]
+    if kwargs.get("action_type") == "waypoints":  # a waypoint box in metres is not normalised, by design
+        msgs = [m for m in msgs if "symmetric and normalized" not in m]
+    assert msgs == []
+
+
+def test_rollout_matches_run_episode_and_reports_metrics(cache):
+    env = gym.make("icrsumo/ICRDrive-v0")
+    obs, info = env.reset(seed=3)
+    assert obs["bev"].shape == (7, 128, 128) and obs["bev"].dtype == np.uint8
+    assert info["route_id"] == "tiny_003" and info["family"] == "baseline"
+    assert obs["instruction"] and obs["instruction"] in env.observation_space["instruction"]
+    total, steps = 0.0, 0
+    while True:
+        obs, reward, terminated, truncated, info = env.step(_policy(obs))
+        total += reward
+        steps += 1
+        if terminated or truncated:
+            break
+    log = env.unwrapped.episode_log()
+    env.close()
+    # the same closed loop as icrsumo evaluate: same actions, byte-identical log
+    sc, sets = env.unwrapped.scenario, list(env.unwrapped.sets.values())
+    ref = run_episode(sc, sets[0], _Same())
+    assert dumps_log(log) == dumps_log(ref)
+    r = score_episode(ref)
+    assert (info["DS"], info["RC"], info["IS"], info["termination"]) == (r.ds, r.rc, r.is_, r.termination)
+    assert terminated == (r.termination_class.value != "TO") and truncated == (not terminated)
+    assert [i["kind"] for i in info["infractions"]] == [i.kind for i in r.infractions]
+    # the documented reward: RC, minus 100 (1 - f) per infraction, minus 100 x (m driven outside
+    # the route's lanes) / route length
+    penalty = sum(100 * (1 - i.factor) for i in r.infractions)
+    outside = sum(np.hypot(ref.x[i] - ref.x[i - 1], ref.y[i] - ref.y[i - 1])
+                  for i in range(1, len(ref.t)) if ref.outside[i] == 1)
+    expected = route_completion(ref) - penalty - 100 * outside / ref.route_length
+    assert total == pytest.approx(expected, abs=1e-9)
+    assert steps == len(range(0, len(ref.t) - 1, 2))  # one step per decision (every 2nd SUMO step)
+
+
+def test_reset_is_deterministic_and_options_pick_the_sequence(cache):
+    env = gym.make("icrsumo/ICRDrive-v0")
+    a, _ = env.reset(seed=1)
+    for _ in range(15):
+        a, *_ = env.step(np.array([0.1, 0.6, 0.0], np.float32))
+    b, _ = env.reset(seed=2)
+    for _ in range(15):
+        b, *_ = env.step(np.array([0.1, 0.6, 0.0], np.float32))
+    assert np.array_equal(a["bev"], b["bev"]) and a["speed"] == b["speed"]
+    _, info = env.reset(options={"family": "misleading", "k": 3})
+    assert (info["family"], info["k"]) == ("misleading", 3)
+    with pytest.raises(AgentError, match="NaN"):
+        env.step(np.array([np.nan, 0.0, 0.0], np.float32))
+    env.close()
+
+
+def test_second_env_in_a_process_suspends_the_first(cache):
+    first = gym.make("icrsumo/ICRDrive-v0")
+    first.reset()
+    second = gym.make("icrsumo/ICRDrive-v0")
+    second.reset()
+    second.step(np.zeros(3, np.float32))
+    with pytest.raises(RuntimeError, match="AsyncVectorEnv"):
+        first.step(np.zeros(3, np.float32))
+    first.reset()  # takes the simulation back
+    first.step(np.zeros(3, np.float32))
+    first.close()
+    second.close()
+
+
+def test_readme_gymnasium_example_runs(cache, tmp_path):
+    """The README's Gymnasium example, exactly as printed, in a fresh interpreter."""
+    text = README.read_text(encoding="utf-8")
+    blocks = [b for b in re.findall(r"```python\n(.*?)```", text, re.S) if "icrsumo/ICRDrive-v0" in b]
+    assert len(blocks) == 1, "the README must hold exactly one Gymnasium example"
+    env = {**os.environ, "ICRSUMO_CACHE": str(cache)}
+    proc = subprocess.run([sys.executable, "-c", blocks[0]], cwd=tmp_path, env=env, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert re.search(r"return -?\d+\.\d  DS \d+\.\d  RC \d+\.\d", proc.stdout), proc.stdout

@@ -1,0 +1,565 @@
+"""Performance of icrsumo on this machine, measured in one run: a table and one JSON line.
+
+    python tools/benchmark.py                     # everything (about 15-20 min on 2 cores)
+    python tools/benchmark.py --skip-eval         # without the three full ICR runs (about 1 min)
+    python tools/benchmark.py --quick --skip-eval # smoke test (well under 30 s)
+
+Every timed quantity is run ``--repeats`` times (default 5; the ICR runs ``--eval-repeats``
+times, default 1) and reported as the median with min and max. Timings on a shared machine
+are noisy: compare the ratios, which pair measurements taken back to back in the same repeat.
+The script pins BLAS / OpenMP / torch to one thread per process (``--threads``), so that "per
+core" means per process, as in an evaluation worker.
+
+What is measured (one bundled scenario, ``--route``, default ``tiny_004``: the icr_grid town
+with normal traffic, 12 traffic lights; converted exactly as ``icrsumo convert-routes`` does):
+
+* **bare SUMO** -- the physical limit: libsumo stepping the same scenario (same seed, same
+  background traffic) with the ego inserted exactly as the runner inserts it (same depart time,
+  lane, position, speed 0) but driven by SUMO itself along its route: no agent, no BEV, no
+  subscriptions, no Python work except ``simulationStep()``. Timed over the same number of steps
+  as the closed-loop episode it is paired with, after the same warm-up; SUMO start and warm-up
+  are excluded (they are reported separately as the episode setup).
+* **SUMO, ego moved** -- the SUMO-side floor of any closed loop: the same scenario with the ego
+  under remote control, moved along the route-oracle's recorded trajectory by
+  ``vehicle.moveToXY(keepRoute=2)`` every step, with the subscriptions the runner uses.
+* **runner only** -- the closed loop (``icrsumo.runner.run_episode``) with a non-privileged agent
+  whose ``act`` costs nothing: it replays the route-oracle's recorded actions, so the episode is
+  the route-oracle's, byte for byte (checked), but no World view is built and no planning runs.
+  This is the runner's own overhead for a learned agent: sensors, infractions, termination,
+  BEV at the agent's rate, controller, dynamics, ``moveToXY`` and SUMO's step.
+* **each agent** (``--agents``, default every built-in agent of
+  ``icrsumo.agents.registry.BUILTIN``, learned agents included as they are added): the closed
+  loop per step (the loop only: SUMO start and warm-up excluded), its ratio to bare SUMO (per
+  repeat, then the median), the BEV render time per frame and the agent's ``act`` time per call
+  (both timed inside the loop through ``RunOptions(timings=...)``), and simulated seconds per
+  wall second per core, for the loop and for whole episodes (SUMO start and the 20 s traffic
+  warm-up included).
+* **instruction generation**: baseline sequence + 4 families x K = 8 variants (32 variant
+  sequences) + the route's JSON document, as ``icrsumo generate`` builds them, for
+  ``--instr-routes`` routes (default 1,000) whose maneuvers are those of the bundled tiny
+  routes, repeated under distinct route ids (so every route draws its own variants).
+* **the default ICR run** (``icrsumo evaluate`` with its defaults: tiny suite, the four families,
+  K = 8, the default agent: 528 episodes) with ``--workers 1``, ``--workers 2`` and
+  ``--backend ray --workers 2``, each in a fresh out folder. Conversion and instruction
+  generation are done once beforehand and copied in (evaluate reuses them), and every run is
+  followed by a second identical call that finds all episodes stored: its time (reuse checks,
+  generation, reports, figures) is subtracted, so episodes per second counts episodes only; the
+  full wall time is reported too. The three ``summary.json`` files are compared byte for byte.
+  ``--skip-eval`` leaves this out.
+
+``--quick``: 2 repeats, 100 instruction routes, only ``--route`` converted (and, without
+``--skip-eval``, ICR runs of that route with K = 1: 5 episodes each).
+
+``benchmarks/closed_loop.py`` (the older closed-loop benchmark) now runs this script with
+``--skip-eval``.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+_THREADS = "1"
+for _i, _a in enumerate(sys.argv):  # before numpy / torch are imported
+    if _a == "--threads" and _i + 1 < len(sys.argv):
+        _THREADS = sys.argv[_i + 1]
+    elif _a.startswith("--threads="):
+        _THREADS = _a.split("=", 1)[1]
+for _v in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    os.environ.setdefault(_v, _THREADS)
+
+import argparse  # noqa: E402
+import contextlib  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import platform  # noqa: E402
+import resource  # noqa: E402
+import shutil  # noqa: E402
+import statistics  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+import xml.etree.ElementTree as ET  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from icrsumo.agents.base import Action, EpisodeInfo, Observation  # noqa: E402
+from icrsumo.agents.registry import BUILTIN, DEFAULT_AGENT, make_agent  # noqa: E402
+from icrsumo.convert import ConvertOptions, convert_routes  # noqa: E402
+from icrsumo.fsio import dumps_json  # noqa: E402
+from icrsumo.instructions.banks import load_banks  # noqa: E402
+from icrsumo.instructions.baseline import build_baseline  # noqa: E402
+from icrsumo.instructions.families import FAMILIES, make_variants  # noqa: E402
+from icrsumo.instructions.generate import GenerateOptions, generate, route_rng  # noqa: E402
+from icrsumo.instructions.maneuvers import extract_maneuvers, is_highway  # noqa: E402
+from icrsumo.instructions.store import read_instruction_sets, route_document  # noqa: E402
+from icrsumo.networks import load_net  # noqa: E402
+from icrsumo.resources import bundled_suites  # noqa: E402
+from icrsumo.runner import CONTEXT_RADIUS, LoopTimings, RunOptions, run_episode  # noqa: E402
+from icrsumo.scenario import find_scenarios, read_scenario  # noqa: E402
+from icrsumo.sim import EGO_ID, SumoSession, sumo_constants  # noqa: E402
+
+#: CARLA reference point (issue 7): one LangAuto route with LMDrive on an RTX 3090
+CARLA_LMDRIVE_RT = 0.076
+RUNNER_ONLY = "runner-only"
+
+
+# --------------------------------------------------------------------------- helpers
+def _cpu_s() -> float:
+    """CPU seconds of this process and of its finished, reaped children (the local pool's
+    workers; Ray's workers are not all counted)."""
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def stats(xs: list[float]) -> dict:
+    """Median, min and max (None for an empty list)."""
+    xs = [x for x in xs if x is not None and math.isfinite(x)]
+    if not xs:
+        return {"median": None, "min": None, "max": None}
+    return {"median": statistics.median(xs), "min": min(xs), "max": max(xs)}
+
+
+def _set_threads(n: int) -> None:
+    """One thread per process (``--threads``) for torch (once imported) and OpenCV."""
+    if "torch" in sys.modules:
+        with contextlib.suppress(Exception):
+            sys.modules["torch"].set_num_threads(n)
+    with contextlib.suppress(Exception):
+        import cv2
+
+        cv2.setNumThreads(n)
+
+
+class _Recorder:
+    """Wraps an agent and records its actions."""
+
+    def __init__(self, inner) -> None:
+        self.inner = inner
+        self.name = inner.name
+        self.privileged = getattr(inner, "privileged", False)
+        self.actions: list[Action] = []
+
+    def reset(self, info: EpisodeInfo) -> None:
+        self.inner.reset(info)
+
+    def act(self, obs: Observation) -> Action:
+        a = self.inner.act(obs)
+        self.actions.append(a)
+        return a
+
+
+class ReplayAgent:
+    """A non-privileged agent that replays recorded actions: costs (almost) nothing."""
+
+    name = RUNNER_ONLY
+    privileged = False
+
+    def __init__(self, actions: list[Action]) -> None:
+        self.actions = actions
+        self.i = 0
+
+    def reset(self, info: EpisodeInfo) -> None:
+        self.i = 0
+
+    def act(self, obs: Observation) -> Action:
+        a = self.actions[min(self.i, len(self.actions) - 1)]
+        self.i += 1
+        return a
+
+
+def _add_ego(ls, sc) -> None:
+    """Insert the ego as the runner does: same route, depart lane, position and speed."""
+    lane_index = sc.start_lane.rsplit("_", 1)[1]
+    ls.vehicle.add(EGO_ID, "ego_route", typeID="ego", depart="now", departLane=lane_index,
+                   departPos=f"{sc.start_pos:.2f}", departSpeed="0")
+
+
+def bare_sumo(sc, n_steps: int) -> tuple[float, float]:
+    """(setup s: start + warm-up, s per step) of SUMO alone, ego driven by SUMO."""
+    t0 = time.perf_counter()
+    with SumoSession(sc) as sim:
+        ls = sim.ls
+        sim.run_until(sc.ego_depart)
+        _add_ego(ls, sc)
+        step = ls.simulationStep
+        t1 = time.perf_counter()
+        for _ in range(n_steps):
+            step()
+        t2 = time.perf_counter()
+    return t1 - t0, (t2 - t1) / max(n_steps, 1)
+
+
+def sumo_moved_ego(sc, log, length: float) -> float:
+    """s per step of SUMO with the ego moved along ``log``'s trajectory by moveToXY, with the
+    runner's subscriptions."""
+    tc = sumo_constants()
+    poses = [(x + 0.5 * length * math.cos(h), y + 0.5 * length * math.sin(h), 90.0 - math.degrees(h))
+             for x, y, h in zip(log.x, log.y, log.yaw)]
+    with SumoSession(sc) as sim:
+        ls = sim.ls
+        sim.run_until(sc.ego_depart)
+        _add_ego(ls, sc)
+        ls.vehicle.setSpeedMode(EGO_ID, 0)
+        ls.vehicle.setLaneChangeMode(EGO_ID, 0)
+        sx, sy, sh = sc.start
+        ls.vehicle.moveToXY(EGO_ID, "", -1, sx, sy, 90.0 - math.degrees(sh), 2)
+        ls.simulationStep()
+        ls.vehicle.subscribe(EGO_ID, [tc.VAR_LANE_ID, tc.VAR_LANEPOSITION])
+        ls.vehicle.subscribeContext(EGO_ID, tc.CMD_GET_VEHICLE_VARIABLE, CONTEXT_RADIUS,
+                                    [tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_LENGTH, tc.VAR_WIDTH])
+        ls.vehicle.subscribeContext(EGO_ID, tc.CMD_GET_PERSON_VARIABLE, CONTEXT_RADIUS, [tc.VAR_POSITION])
+        for tl in ls.trafficlight.getIDList():
+            ls.trafficlight.subscribe(tl, [tc.TL_RED_YELLOW_GREEN_STATE])
+        move, step = ls.vehicle.moveToXY, ls.simulationStep
+        t1 = time.perf_counter()
+        for fx, fy, a in poses[1:]:
+            move(EGO_ID, "", -1, fx, fy, a, 2)
+            step()
+        t2 = time.perf_counter()
+    return (t2 - t1) / max(len(poses) - 1, 1)
+
+
+def _one_route_file(split: str, route: str, out: Path) -> Path:
+    """A route XML holding only ``route`` of the bundled ``split`` (converted scenarios do not
+    depend on the other routes of the file)."""
+    tree = ET.parse(bundled_suites()[split])
+    root = tree.getroot()
+    for el in list(root.findall("route")):
+        if el.get("id") != route:
+            root.remove(el)
+    if not root.findall("route"):
+        raise SystemExit(f"benchmark: no route {route!r} in the {split} split")
+    path = out / f"{route}.xml"
+    tree.write(path, encoding="utf-8", xml_declaration=True)
+    return path
+
+
+# --------------------------------------------------------------------------- sections
+def closed_loop(sc, baseline, agents: list[str], repeats: int, log=print) -> dict:
+    """Per-step costs of bare SUMO, SUMO with a moved ego, the runner alone and each agent."""
+    length = float(sc.manifest["ego"]["length"])
+    dt = float(sc.manifest.get("step_length", 0.05))
+    # the route-oracle's actions and trajectory (not timed), for "runner only" and "ego moved"
+    rec = _Recorder(make_agent("route-oracle"))
+    ref_log = run_episode(sc, baseline, rec)
+    rows: dict[str, dict] = {}
+    raw: dict[str, dict[str, list]] = {}
+    errors: dict[str, str] = {}
+    names = [RUNNER_ONLY, *agents]
+    same_trajectory = None
+    for rep in range(repeats):
+        moved = sumo_moved_ego(sc, ref_log, length)
+        moved_bare = bare_sumo(sc, len(ref_log.t) - 1)[1]
+        raw.setdefault("_moved", {}).setdefault("per_step", []).append(moved)
+        raw["_moved"].setdefault("ratio", []).append(moved / moved_bare)
+        for name in names:
+            if name in errors:
+                continue
+            try:
+                agent = ReplayAgent(rec.actions) if name == RUNNER_ONLY else make_agent(name)
+                _set_threads(1)
+                tm = LoopTimings()
+                ep = run_episode(sc, baseline, agent, RunOptions(timings=tm))
+            except Exception as err:  # a learned agent without weights, say: report, go on
+                errors[name] = f"{type(err).__name__}: {err}"
+                log(f"benchmark: agent {name} skipped: {errors[name]}")
+                continue
+            if name == RUNNER_ONLY and same_trajectory is None:
+                same_trajectory = (ep.x, ep.y, ep.yaw, ep.events) == (ref_log.x, ref_log.y, ref_log.yaw,
+                                                                     ref_log.events)
+            setup_bare, bare = bare_sumo(sc, tm.steps)
+            loop = tm.loop_s / tm.steps
+            r = raw.setdefault(name, {})
+            for key, val in (
+                ("bare", bare), ("loop", loop), ("ratio", loop / bare),
+                ("overhead", (tm.loop_s - tm.act_s) / tm.steps),
+                ("bev", tm.render_s / max(tm.frames, 1)), ("act", tm.act_s / max(tm.acts, 1)),
+                ("act_per_step", tm.act_s / tm.steps), ("setup", tm.setup_s), ("setup_bare", setup_bare),
+                ("sim_rt", tm.steps * dt / tm.loop_s),
+                ("episode_rt", tm.steps * dt / (tm.loop_s + tm.setup_s)),
+            ):
+                r.setdefault(key, []).append(val)
+            r["steps"] = tm.steps
+            r["termination"] = ep.termination
+        log(f"  repeat {rep + 1}/{repeats} done")
+    ms = 1e3
+    for name in names:
+        if name not in raw:
+            continue
+        r = raw[name]
+        rows[name] = {
+            "steps": r["steps"], "termination": r["termination"],
+            "privileged": name != RUNNER_ONLY and bool(getattr(BUILTIN.get(name), "privileged", False)),
+            "bare_sumo_ms_per_step": stats([v * ms for v in r["bare"]]),
+            "closed_loop_ms_per_step": stats([v * ms for v in r["loop"]]),
+            "ratio_to_bare": stats(r["ratio"]),
+            "runner_overhead_ms_per_step": stats([v * ms for v in r["overhead"]]),
+            "bev_ms_per_frame": stats([v * ms for v in r["bev"]]),
+            "act_ms_per_call": stats([v * ms for v in r["act"]]),
+            "act_ms_per_step": stats([v * ms for v in r["act_per_step"]]),
+            "setup_s": stats(r["setup"]), "bare_setup_s": stats(r["setup_bare"]),
+            "sim_s_per_wall_s": stats(r["sim_rt"]),
+            "episode_sim_s_per_wall_s": stats(r["episode_rt"]),
+        }
+    moved = [v * ms for v in raw["_moved"]["per_step"]]
+    bare_all = [v * ms for n in raw if n != "_moved" for v in raw[n]["bare"]]
+    return {"agents": rows, "errors": errors, "sumo_moved_ego_ms_per_step": stats(moved),
+            "sumo_moved_ego_ratio_to_bare": stats(raw["_moved"]["ratio"]),
+            "bare_sumo_ms_per_step": stats(bare_all), "runner_only_same_trajectory": same_trajectory,
+            "control_dt_s": dt * RunOptions().control_every, "step_length_s": dt}
+
+
+def _spans(sc, net) -> tuple[tuple[float, float], ...]:
+    cuts = [0.0] + [float(j["pos"]) for j in sc.manifest["junctions"]] + [sc.length]
+    return tuple((cuts[i], cuts[i + 1]) for i, e in enumerate(sc.ego_edges)
+                 if i + 1 < len(cuts) and is_highway(net, e))
+
+
+def instruction_generation(scenario_dirs: list[Path], n_routes: int, repeats: int, k: int = 8) -> dict:
+    """Seconds for ``n_routes`` routes x (baseline + 4 families x K variants + JSON document)."""
+    banks = load_banks(None)
+    inputs = []
+    t0 = time.perf_counter()
+    for d in scenario_dirs:
+        sc = read_scenario(d)
+        net = load_net(sc.net)
+        inputs.append((sc, extract_maneuvers(sc, net), _spans(sc, net), net.crossing_nodes))
+    t_extract = (time.perf_counter() - t0) / len(scenario_dirs)
+    seed = 2026
+    times, times_json = [], []
+    n_sets = 0
+    for _ in range(repeats):
+        t_sets = t_json = 0.0
+        n_sets = 0
+        for i in range(n_routes):
+            sc, maneuvers, spans, crossings = inputs[i % len(inputs)]
+            rid = f"{sc.route_id}#{i:05d}"
+            t1 = time.perf_counter()
+            base = build_baseline(rid, sc.length, maneuvers, banks, sc.seed + i, spans, crossings)
+            variants = make_variants(base, FAMILIES, k, banks, seed, route_rng(seed, rid))
+            t2 = time.perf_counter()
+            dumps_json(route_document(base, variants, maneuvers, {"seed": seed, "k": k}))
+            t3 = time.perf_counter()
+            t_sets += t2 - t1
+            t_json += t3 - t2
+            n_sets += len(variants)
+        times.append(t_sets)
+        times_json.append(t_sets + t_json)
+    return {"routes": n_routes, "variant_sets": n_sets, "variants_per_route": len(FAMILIES) * k,
+            "sequences_s": stats(times), "with_json_s": stats(times_json),
+            "maneuver_extraction_ms_per_route": t_extract * 1e3}
+
+
+def icr_runs(converted: Path, work: Path, configs: list[tuple[str, str, int]], repeats: int,
+             routes: tuple[str, ...] | None, k: int, log=print) -> dict:
+    """The default ICR run per (label, backend, workers), episodes timed without the rest."""
+    from icrsumo.evaluate import EvalOptions, evaluate
+    from icrsumo.store import ResultStore
+
+    prep = work / "prep"
+    shutil.copytree(converted, prep / "scenarios")
+    t0 = time.perf_counter()
+    generate(prep / "scenarios", prep / "instructions", GenerateOptions(families=FAMILIES, k=k, seed=2026))
+    prep_s = time.perf_counter() - t0
+    out: dict = {"prep_generate_s": prep_s, "runs": {}}
+    summaries = {}
+    for label, backend, workers in configs:
+        if backend == "ray":
+            try:
+                import ray  # noqa: F401
+            except ImportError:
+                out["runs"][label] = {"error": "ray is not installed (pip install 'icrsumo[ray]')"}
+                continue
+        walls, eps_s, rates, overheads, core_rt, cpu = [], [], [], [], [], []
+        n = 0
+        for rep in range(repeats):
+            run_dir = work / f"{label}_{rep}"
+            shutil.copytree(prep, run_dir)
+            opts = EvalOptions(out=run_dir, workers=workers, backend=backend, quiet=True, k=k,
+                               routes=routes)
+            c1 = _cpu_s()
+            t1 = time.perf_counter()
+            summary = evaluate(opts)
+            t2 = time.perf_counter()
+            cpu.append(_cpu_s() - c1)
+            evaluate(opts)  # everything stored: conversion reuse, generation, reports only
+            t3 = time.perf_counter()
+            n = summary["episodes"]["done"] + summary["episodes"]["crashed"]
+            with ResultStore(run_dir / "results.sqlite") as store:
+                sim_s = sum(r.duration for r in store.records())
+            episodes_wall = max((t2 - t1) - (t3 - t2), 1e-9)
+            walls.append(t2 - t1)
+            overheads.append(t3 - t2)
+            eps_s.append(episodes_wall)
+            rates.append(n / episodes_wall)
+            core_rt.append(sim_s / (episodes_wall * workers))
+            summaries.setdefault(label, (run_dir / "summary.json").read_bytes())
+            log(f"  {label} repeat {rep + 1}/{repeats}: {n} episodes, {t2 - t1:.1f} s "
+                f"({n / episodes_wall:.2f} episodes/s)")
+            if rep + 1 < repeats:
+                shutil.rmtree(run_dir, ignore_errors=True)
+        out["runs"][label] = {"backend": backend, "workers": workers, "episodes": n,
+                              "wall_s": stats(walls), "non_episode_s": stats(overheads),
+                              "episodes_s": stats(eps_s), "episodes_per_s": stats(rates),
+                              "sim_s_per_wall_s_per_core": stats(core_rt),
+                              # Ray's workers are not this process's children: their CPU is not seen
+                              "cpu_s": stats(cpu if backend == "local" else []),
+                              "cpu_s_per_episode": stats([c / max(n, 1) for c in cpu]
+                                                         if backend == "local" else [])}
+    if summaries:
+        first = next(iter(summaries.values()))
+        out["summaries_identical"] = all(v == first for v in summaries.values())
+    return out
+
+
+# --------------------------------------------------------------------------- output
+def _fmt(s: dict | None, digits: int = 3) -> str:
+    if not s or s.get("median") is None:
+        return "-"
+    return f"{s['median']:.{digits}f} [{s['min']:.{digits}f}-{s['max']:.{digits}f}]"
+
+
+def table(res: dict) -> str:
+    cl = res["closed_loop"]
+    la = res["machine"]["load_average_start"]
+    lines = [
+        f"machine: {res['machine']['cores']} cores (load average {la[0]:.1f} at start), "
+        f"{res['machine']['processor']}, Python "
+        f"{res['machine']['python']}; scenario {res['scenario']['route']} ({res['scenario']['town']}, "
+        f"{res['scenario']['length_m']:.0f} m, normal traffic), step {cl['step_length_s']} s, agent every "
+        f"{cl['control_dt_s']:.2f} s; {res['repeats']} repeats, median [min-max]",
+        "",
+        "| what | ms per step | x bare SUMO | BEV ms/frame | act ms/call | sim s/wall s (loop / episode) |",
+        "|---|---:|---:|---:|---:|---:|",
+        f"| bare SUMO (ego driven by SUMO) | {_fmt(cl['bare_sumo_ms_per_step'])} | 1 | | | |",
+        f"| SUMO, ego moved by moveToXY | {_fmt(cl['sumo_moved_ego_ms_per_step'])} | "
+        f"{_fmt(cl['sumo_moved_ego_ratio_to_bare'], 2)} | | | |",
+    ]
+    for name, r in cl["agents"].items():
+        label = "runner only (replayed actions, non-privileged)" if name == RUNNER_ONLY else name
+        rt, ert = r["sim_s_per_wall_s"]["median"], r["episode_sim_s_per_wall_s"]["median"]
+        lines.append(
+            f"| {label} | {_fmt(r['closed_loop_ms_per_step'])} | {_fmt(r['ratio_to_bare'], 2)} | "
+            f"{_fmt(r['bev_ms_per_frame'])} | {_fmt(r['act_ms_per_call'])} | {rt:.0f} / {ert:.0f} |")
+    for name, err in cl["errors"].items():
+        lines.append(f"| {name} | skipped: {err} | | | | |")
+    ig = res["instructions"]
+    lines += ["", f"instruction generation, {ig['routes']} routes x {ig['variants_per_route']} variants "
+              f"(+ baseline): {_fmt(ig['sequences_s'], 2)} s; with JSON documents "
+              f"{_fmt(ig['with_json_s'], 2)} s"]
+    ev = res.get("eval")
+    if ev:
+        lines += ["", "| ICR run | episodes | wall s | episodes s | episodes/s | sim s per wall s per core "
+                  "| CPU s per episode |", "|---|---:|---:|---:|---:|---:|---:|"]
+        for label, r in ev["runs"].items():
+            if "error" in r:
+                lines.append(f"| {label} | {r['error']} | | | | |")
+                continue
+            lines.append(f"| {label} | {r['episodes']} | {_fmt(r['wall_s'], 1)} | {_fmt(r['episodes_s'], 1)} "
+                         f"| {_fmt(r['episodes_per_s'], 2)} | {_fmt(r['sim_s_per_wall_s_per_core'], 0)} "
+                         f"| {_fmt(r['cpu_s_per_episode'], 3)} |")
+        if "summaries_identical" in ev:
+            lines.append(f"summary.json identical across runs: {ev['summaries_identical']}")
+    return "\n".join(lines)
+
+
+def targets(res: dict) -> dict:
+    """Issue 7's targets, checked against this run (None where not measured)."""
+    cl = res["closed_loop"]["agents"]
+    default = cl.get(DEFAULT_AGENT)
+    out = {"default_agent": DEFAULT_AGENT,
+           "default_agent_privileged": bool(getattr(BUILTIN.get(DEFAULT_AGENT), "privileged", False))}
+    if default:
+        ratio = default["ratio_to_bare"]["median"]
+        rt = default["sim_s_per_wall_s"]["median"]
+        out["closed_loop_ratio_le_3"] = {"value": ratio, "met": ratio <= 3.0}
+        out["sim_rt_ge_100_per_core"] = {"value": rt, "met": rt >= 100.0}
+    ev = res.get("eval")
+    if ev and not res.get("quick"):
+        runs = ev["runs"]
+        one, two, ray = (runs.get(k, {}) for k in ("local-1", "local-2", "ray-2"))
+        if "wall_s" in two:
+            w = two["wall_s"]["median"]
+            out["default_run_le_300s_2_workers"] = {"value": w, "met": w <= 300.0}
+        if "episodes_per_s" in one and "episodes_per_s" in two:
+            sp = two["episodes_per_s"]["median"] / one["episodes_per_s"]["median"]
+            out["speedup_2_over_1_ge_1_7"] = {"value": sp, "met": sp >= 1.7}
+        if "episodes_per_s" in two and "episodes_per_s" in ray:
+            rel = ray["episodes_per_s"]["median"] / two["episodes_per_s"]["median"]
+            out["ray_within_10pct_of_pool"] = {"value": rel, "met": rel >= 0.9}
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--route", default="tiny_004", help="bundled route of the closed-loop runs")
+    ap.add_argument("--split", default="tiny", help="bundled split of --route")
+    ap.add_argument("--agents", action="append",
+                    help="agents (comma separated, repeatable; default every built-in agent)")
+    ap.add_argument("--repeats", type=int, help="repeats of each timing (default 5, --quick 2)")
+    ap.add_argument("--instr-routes", type=int, help="routes of the generation timing (default 1000)")
+    ap.add_argument("--skip-eval", action="store_true", help="leave out the full ICR runs")
+    ap.add_argument("--eval-repeats", type=int, default=1, help="repeats of each ICR run (default 1)")
+    ap.add_argument("--no-ray", action="store_true", help="leave out the Ray ICR run")
+    ap.add_argument("--quick", action="store_true", help="smoke mode: fewer repeats and routes")
+    ap.add_argument("--threads", type=int, default=1, help="BLAS / torch / OpenCV threads (default 1)")
+    ap.add_argument("--json", type=Path, help="also write the JSON result here")
+    args = ap.parse_args(argv)
+    repeats = args.repeats or (2 if args.quick else 5)
+    n_instr = args.instr_routes or (100 if args.quick else 1000)
+    agents = [a for spec in (args.agents or [",".join(BUILTIN)]) for a in spec.split(",") if a]
+    _set_threads(args.threads)
+
+    def log(msg: str) -> None:
+        print(msg, file=sys.stderr, flush=True)
+
+    res: dict = {"machine": {"cores": os.cpu_count(), "processor": platform.processor() or platform.machine(),
+                             "python": platform.python_version(), "platform": platform.platform(),
+                             "load_average_start": os.getloadavg()},
+                 "repeats": repeats, "quick": args.quick, "threads": args.threads,
+                 "carla_lmdrive_rt": CARLA_LMDRIVE_RT}
+    with tempfile.TemporaryDirectory(prefix="icrsumo_bench_") as tmp:
+        work = Path(tmp)
+        t0 = time.perf_counter()
+        src = _one_route_file(args.split, args.route, work) if args.quick else bundled_suites()[args.split]
+        conv = work / "converted"
+        rep = convert_routes(src, conv, ConvertOptions(workers=min(2, os.cpu_count() or 1)))
+        if rep.failures:
+            log("\n".join(rep.failures))
+        dirs = find_scenarios(conv)
+        sc_dir = next((d for d in dirs if read_scenario(d).route_id == args.route), None)
+        if sc_dir is None:
+            raise SystemExit(f"benchmark: route {args.route} was not converted")
+        generate(sc_dir, work / "instr", GenerateOptions(families=("noise",), k=1))
+        baseline = read_instruction_sets(work / "instr" / f"{args.route}.json")[0]
+        sc = read_scenario(sc_dir)
+        res["scenario"] = {"route": sc.route_id, "town": sc.town, "length_m": sc.length,
+                           "n_vehicles": sc.manifest["traffic"].get("n_vehicles"),
+                           "n_pedestrians": sc.manifest["traffic"].get("n_pedestrians")}
+        res["setup_s"] = time.perf_counter() - t0
+        log(f"closed loop on {sc.route_id}: {', '.join(agents)} ({repeats} repeats)")
+        res["closed_loop"] = closed_loop(sc, baseline, agents, repeats, log)
+        log(f"instruction generation: {n_instr} routes")
+        res["instructions"] = instruction_generation(dirs, n_instr, repeats)
+        if not args.skip_eval:
+            configs = [("local-1", "local", 1), ("local-2", "local", 2)]
+            if not args.no_ray:
+                configs.append(("ray-2", "ray", 2))
+            if args.quick:
+                routes, k = tuple(sc.route_id for sc in map(read_scenario, dirs[:2])), 1
+            else:
+                routes, k = None, 8
+            log(f"ICR runs: {', '.join(c[0] for c in configs)}")
+            res["eval"] = icr_runs(conv, work / "eval", configs, args.eval_repeats, routes, k, log)
+    res["machine"]["load_average_end"] = os.getloadavg()
+    res["targets"] = targets(res)
+    print(table(res))
+    line = json.dumps(res, sort_keys=True)
+    if args.json:
+        args.json.write_text(line + "\n", encoding="utf-8")
+    print(line)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
