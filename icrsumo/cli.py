@@ -63,7 +63,7 @@ def _cmd_generate(args: argparse.Namespace) -> int:
 
 
 def _cmd_run_episode(args: argparse.Namespace) -> int:
-    from .agents.registry import make_agent
+    from .agents.registry import DEFAULT_AGENT, make_agent
     from .instructions.store import read_instruction_sets
     from .logs import result_to_dict, write_log
     from .metrics import score_episode
@@ -77,6 +77,7 @@ def _cmd_run_episode(args: argparse.Namespace) -> int:
         have = sorted({f"{s.family}:{s.k}" for s in sets})
         raise InputError(args.instructions, f"{args.family} k={args.k}", "no such instruction set",
                          f"pick one of {', '.join(have[:6])}, ...")
+    args.agent = args.agent or DEFAULT_AGENT
     agent = make_agent(args.agent)
     log = run_episode(sc, chosen[0], agent, RunOptions(video=Path(args.video) if args.video else None))
     result = score_episode(log)
@@ -230,8 +231,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--family", default="baseline",
                    choices=["baseline", "paraphrase", "ambiguity", "noise", "misleading"])
     e.add_argument("--k", type=int, default=0, help="variant index (default 0)")
-    e.add_argument("--agent", default="instruction-follower",
-                   help="route-oracle or instruction-follower (default)")
+    e.add_argument("--agent", default=None,
+                   help="built-in name, module:Class, file.py:Class or remote:URL (default: the "
+                   "default agent of evaluate, bev-ngram)")
     e.add_argument("--log", help="write the episode log (JSON) here")
     e.add_argument("--video", help="write a BEV video with the instruction overlaid (.mp4)")
     e.set_defaults(func=_cmd_run_episode)

@@ -18,8 +18,9 @@ BUILTIN: dict[str, type] = {"route-oracle": RouteOracle, "instruction-follower":
 # learned agents whose checkpoints ship with the package (torch loads on first use)
 BUILTIN.update({cls.name: cls for cls in (TokenAgent, NgramAgent, NgramAugAgent)
                 if (CHECKPOINTS / cls.checkpoint).is_file()})
-#: the agent `icrsumo evaluate` uses when none is named
-DEFAULT_AGENT = "instruction-follower"
+#: the agent `icrsumo evaluate` uses when none is named: the shipped learned agent with the
+#: better baseline DS of the two trained on baseline phrasings only (README, Learned agents)
+DEFAULT_AGENT = "bev-ngram" if "bev-ngram" in BUILTIN else "instruction-follower"
 #: ``remote:http://HOST:PORT``: an agent behind an icrsumo-agent/1 server (icrsumo.agents.remote)
 REMOTE_PREFIX = "remote:"
 
