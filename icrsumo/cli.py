@@ -104,7 +104,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         families=_split_list(args.family) or FAMILIES, k=args.k, seed=args.seed,
         routes=_split_list(args.routes) or None, workers=args.workers, backend=args.backend,
         address=args.address, traffic=args.traffic, quiet=args.quiet, rollout_route=args.rollout_route,
-        agent_timeout=args.agent_timeout or None,
+        agent_timeout=args.agent_timeout or None, batch_inference=args.batch_inference,
+        max_batch=args.max_batch,
     )
     t0 = time.perf_counter()
     summary = evaluate(opts)
@@ -233,7 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--k", type=int, default=0, help="variant index (default 0)")
     e.add_argument("--agent", default=None,
                    help="built-in name, module:Class, file.py:Class or remote:URL (default: the "
-                   "default agent of evaluate, bev-ngram)")
+                   "default agent of evaluate, bev-token)")
     e.add_argument("--log", help="write the episode log (JSON) here")
     e.add_argument("--video", help="write a BEV video with the instruction overlaid (.mp4)")
     e.set_defaults(func=_cmd_run_episode)
@@ -262,6 +263,12 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--out", default="icr_out", help="output folder (default icr_out)")
     v.add_argument("--rollout-route", help="route of the paired rollout figure (default: the first)")
     v.add_argument("--quiet", action="store_true", help="no progress bar or table")
+    v.add_argument("--batch-inference", metavar="DEVICE",
+                   help="run each non-privileged agent in one inference process on DEVICE (cuda, cpu, "
+                   "auto) that batches the observations of all workers (default: every worker runs "
+                   "its own agent)")
+    v.add_argument("--max-batch", type=int, default=32, metavar="N",
+                   help="observations per forward pass with --batch-inference (default 32)")
     v.add_argument("--agent-timeout", type=float, default=60.0, metavar="S",
                    help="seconds an agent's reset/act call may take before the episode is stored as "
                    "crashed (default 60; 0: no limit)")

@@ -33,7 +33,7 @@ import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from .agents.base import AgentTimeout
@@ -72,6 +72,10 @@ class EvalOptions:
     quiet: bool = False
     rollout_route: str | None = None
     agent_timeout: float | None = AGENT_TIMEOUT
+    #: device of one batched inference process per non-privileged agent (None: every worker
+    #: runs its own agent), e.g. "cuda"; ``max_batch``: observations per forward pass
+    batch_inference: str | None = None
+    max_batch: int = 32
 
     def check(self) -> None:
         bad = [f for f in self.families if f not in FAMILIES]
@@ -89,6 +93,14 @@ class EvalOptions:
                              "give seconds per agent call (0 on the command line: no limit)")
         for spec in self.agents:
             agent_factory(spec)
+        if self.batch_inference is not None:
+            if self.backend != "local":
+                raise InputError("--batch-inference", self.batch_inference, "works with the local backend "
+                                 "only (its workers reach the inference process through a Unix socket)",
+                                 "use --backend local")
+            if self.max_batch < 1:
+                raise InputError("--max-batch", str(self.max_batch), "must be at least 1",
+                                 "give a positive count")
         p = Path(self.suite)
         if self.suite not in bundled_suites() and not p.is_file() and not (p / "index.json").is_file():
             raise InputError("--suite", self.suite, "unknown suite",
@@ -431,27 +443,64 @@ def evaluate(opts: EvalOptions) -> dict:
         todo = [j for j in jobs if j.key not in have]
         progress = _Progress(len(todo), opts.quiet)
         attempts: dict[tuple, int] = {}
-        queue = todo
-        while queue:
-            retry = []
-            stream = _ray(queue, opts.workers, opts.address) if opts.backend == "ray" \
-                else _local(queue, opts.workers, opts.agent_timeout)
-            for job, (rec, log_json, err) in stream:
-                n = attempts[job.key] = attempts.get(job.key, 0) + 1
-                if rec is not None:
-                    store.put(EpisodeRecord(**{**rec.__dict__, "attempts": n}), log_json)
-                    progress.tick()
-                elif n < 2 and not err.startswith(f"{AgentTimeout.__name__}:"):  # a hang is not retried
-                    retry.append(job)
-                else:
-                    store.put(EpisodeRecord(job.agent, job.route_id, job.family, job.k, job.seed,
-                                            status="crashed", attempts=n, message=err[:2000]))
-                    progress.tick()
-            queue = retry
+        servers = _start_batch_servers(opts, todo)
+        queue = [replace(j, agent_spec=servers[j.agent_spec].worker_spec) if j.agent_spec in servers else j
+                 for j in todo]
+        try:
+            _run_queue(queue, opts, store, progress, attempts)
+        finally:
+            for server in servers.values():
+                s = server.stop()
+                if s and not opts.quiet:
+                    print(f"icrsumo: batched inference of {server.name} on {opts.batch_inference}: "
+                          f"{s['acts']} actions in {s['batches']} forward passes (mean batch "
+                          f"{s['acts'] / max(s['batches'], 1):.1f}, largest {s['largest_batch']})",
+                          file=sys.stderr)
         keys = {j.key for j in jobs}
         records = [r for r in store.records() if (r.agent, r.route_id, r.family, r.k, r.seed) in keys]
         summary = _report(opts, out, store, records, scenarios, instr_dir)
     return summary
+
+
+def _start_batch_servers(opts: EvalOptions, todo: list[Job]) -> dict:
+    """One batched inference process per non-privileged agent spec of ``todo`` (spec ->
+    :class:`icrsumo.agents.batched.BatchServer`), when ``opts.batch_inference`` is set."""
+    if opts.batch_inference is None or not todo:
+        return {}
+    from .agents.batched import start_server
+
+    servers: dict = {}
+    try:
+        for spec in dict.fromkeys(j.agent_spec for j in todo):
+            if not getattr(agent_factory(spec), "privileged", False):
+                servers[spec] = start_server(spec, opts.batch_inference, opts.max_batch)
+    except BaseException:
+        for server in servers.values():
+            server.stop()
+        raise
+    return servers
+
+
+def _run_queue(queue: list[Job], opts: EvalOptions, store: ResultStore, progress: _Progress,
+               attempts: dict) -> None:
+    """Run ``queue`` on the backend, storing each episode at once; a failed episode is retried
+    once (a hang is not), then stored as crashed."""
+    while queue:
+        retry = []
+        stream = _ray(queue, opts.workers, opts.address) if opts.backend == "ray" \
+            else _local(queue, opts.workers, opts.agent_timeout)
+        for job, (rec, log_json, err) in stream:
+            n = attempts[job.key] = attempts.get(job.key, 0) + 1
+            if rec is not None:
+                store.put(EpisodeRecord(**{**rec.__dict__, "attempts": n}), log_json)
+                progress.tick()
+            elif n < 2 and not err.startswith(f"{AgentTimeout.__name__}:"):  # a hang is not retried
+                retry.append(job)
+            else:
+                store.put(EpisodeRecord(job.agent, job.route_id, job.family, job.k, job.seed,
+                                        status="crashed", attempts=n, message=err[:2000]))
+                progress.tick()
+        queue = retry
 
 
 def report_only(out: Path, quiet: bool = False) -> dict:

@@ -318,7 +318,7 @@ def machine() -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--agent", default="bev-ngram", help="learned agent spec (default bev-ngram)")
+    ap.add_argument("--agent", default="bev-token", help="learned agent spec (default bev-token)")
     ap.add_argument("--modes", default="batched,unbatched,inprocess-cpu",
                     help=f"comma-separated, of {', '.join(MODES)} (default: the first three)")
     ap.add_argument("--clients", type=int, default=2, help="parallel episode workers N (default 2)")

@@ -54,11 +54,14 @@ def _describe(err: BaseException) -> str:
     return f"{type(err).__name__}: {err}{where}"
 
 
-class AgentServer:
-    """An HTTP server for agent ``spec`` on ``host:port`` (port 0: a free one, see ``.port``)."""
+class BatchingCore:
+    """The transport-independent part of an agent server for ``spec``: one agent instance per
+    session, the act batches (``max_batch``) and their statistics. ``run(tasks)`` runs tasks
+    that arrived together: resets and closes first (a session's reset always precedes its acts:
+    its client waits), then the acts in batches. Used by the HTTP server below and by the
+    in-evaluation batched inference process (:mod:`icrsumo.agents.batched`)."""
 
-    def __init__(self, spec: str, host: str = "127.0.0.1", port: int = 0, max_batch: int = 8,
-                 max_sessions: int = 256) -> None:
+    def __init__(self, spec: str, max_batch: int = 8, max_sessions: int = 256) -> None:
         if max_batch < 1:
             raise InputError("--max-batch", str(max_batch), "must be at least 1", "give a positive count")
         factory = agent_factory(spec)
@@ -71,6 +74,87 @@ class AgentServer:
         self.max_batch, self.max_sessions = max_batch, max_sessions
         self.sessions: OrderedDict[str, Any] = OrderedDict()
         self.stats = {"resets": 0, "acts": 0, "batches": 0, "largest_batch": 0}
+
+    def run(self, tasks: list[_Task]) -> None:
+        """Run ``tasks`` (each gets ``status``, ``result`` / ``error`` and is marked done)."""
+        acts = [t for t in tasks if t.kind == "act"]
+        for t in tasks:
+            if t.kind != "act":
+                self._run_other(t)
+        for i in range(0, len(acts), self.max_batch):
+            self._run_acts(acts[i:i + self.max_batch])
+
+    def _run_other(self, t: _Task) -> None:
+        try:
+            if t.kind == "reset":
+                agent = self.factory()
+                agent.reset(t.payload)
+                self.sessions[t.session] = agent
+                self.sessions.move_to_end(t.session)
+                while len(self.sessions) > self.max_sessions:  # forget the least recently used
+                    self.sessions.popitem(last=False)
+                self.stats["resets"] += 1
+            else:
+                agent = self.sessions.pop(t.session, None)
+                if agent is not None and callable(getattr(agent, "close", None)):
+                    agent.close()
+            t.result = None
+        except Exception as err:  # the user's agent failed: the client gets the reason
+            t.status, t.error = 500, f"{t.kind}() raised {_describe(err)}"
+        t.done.set()
+
+    def _run_acts(self, batch: list[_Task]) -> None:
+        live = []
+        for t in batch:
+            agent = self.sessions.get(t.session)
+            if agent is None:
+                t.status, t.error = 404, (f"unknown session {t.session!r}: POST /reset first (the server "
+                                          f"may have restarted or dropped the session)")
+                t.done.set()
+            else:
+                self.sessions.move_to_end(t.session)
+                live.append((t, agent))
+        if not live:
+            return
+        self.stats["batches"] += 1
+        self.stats["acts"] += len(live)
+        self.stats["largest_batch"] = max(self.stats["largest_batch"], len(live))
+        if self.batch_hook and len(live) > 1:
+            try:
+                actions = self.batch([a for _, a in live], [t.payload for t, _ in live])
+                if not isinstance(actions, (list, tuple)) or len(actions) != len(live):
+                    raise AgentError(f"act_batch() returned {type(actions).__name__} of "
+                                     f"{len(actions) if hasattr(actions, '__len__') else '?'} actions "
+                                     f"for {len(live)} observations")
+                results = [(a, None) for a in actions]
+            except Exception as err:
+                results = [(None, err)] * len(live)
+        else:
+            results = []
+            for t, agent in live:
+                try:
+                    results.append((agent.act(t.payload), None))
+                except Exception as err:
+                    results.append((None, err))
+        for (t, _), (action, err) in zip(live, results):
+            if err is None:
+                try:
+                    t.result = validate_action(action)
+                except AgentError as bad:
+                    t.status, t.error = 422, str(bad)
+            elif isinstance(err, AgentError):
+                t.status, t.error = 422, str(err)
+            else:
+                t.status, t.error = 500, f"act() raised {_describe(err)}"
+            t.done.set()
+
+
+class AgentServer(BatchingCore):
+    """An HTTP server for agent ``spec`` on ``host:port`` (port 0: a free one, see ``.port``)."""
+
+    def __init__(self, spec: str, host: str = "127.0.0.1", port: int = 0, max_batch: int = 8,
+                 max_sessions: int = 256) -> None:
+        super().__init__(spec, max_batch, max_sessions)
         self._queue: queue.Queue[_Task | None] = queue.Queue()
         self._worker = threading.Thread(target=self._work, name="icrsumo-agent-worker", daemon=True)
         self._worker.start()
@@ -129,77 +213,7 @@ class AgentServer:
                     self._queue.put(None)
                     break
                 tasks.append(nxt)
-            acts = [t for t in tasks if t.kind == "act"]
-            for t in tasks:  # a session's reset always precedes its acts (its client waits)
-                if t.kind != "act":
-                    self._run_other(t)
-            for i in range(0, len(acts), self.max_batch):
-                self._run_acts(acts[i:i + self.max_batch])
-
-    def _run_other(self, t: _Task) -> None:
-        try:
-            if t.kind == "reset":
-                agent = self.factory()
-                agent.reset(t.payload)
-                self.sessions[t.session] = agent
-                self.sessions.move_to_end(t.session)
-                while len(self.sessions) > self.max_sessions:  # forget the least recently used
-                    self.sessions.popitem(last=False)
-                self.stats["resets"] += 1
-            else:
-                agent = self.sessions.pop(t.session, None)
-                if agent is not None and callable(getattr(agent, "close", None)):
-                    agent.close()
-            t.result = {}
-        except Exception as err:  # the user's agent failed: the client gets the reason
-            t.status, t.error = 500, f"{t.kind}() raised {_describe(err)}"
-        t.done.set()
-
-    def _run_acts(self, batch: list[_Task]) -> None:
-        live = []
-        for t in batch:
-            agent = self.sessions.get(t.session)
-            if agent is None:
-                t.status, t.error = 404, (f"unknown session {t.session!r}: POST /reset first (the server "
-                                          f"may have restarted or dropped the session)")
-                t.done.set()
-            else:
-                self.sessions.move_to_end(t.session)
-                live.append((t, agent))
-        if not live:
-            return
-        self.stats["batches"] += 1
-        self.stats["acts"] += len(live)
-        self.stats["largest_batch"] = max(self.stats["largest_batch"], len(live))
-        if self.batch_hook and len(live) > 1:
-            try:
-                actions = self.batch([a for _, a in live], [t.payload for t, _ in live])
-                if not isinstance(actions, (list, tuple)) or len(actions) != len(live):
-                    raise AgentError(f"act_batch() returned {type(actions).__name__} of "
-                                     f"{len(actions) if hasattr(actions, '__len__') else '?'} actions "
-                                     f"for {len(live)} observations")
-                results = [(a, None) for a in actions]
-            except Exception as err:
-                results = [(None, err)] * len(live)
-        else:
-            results = []
-            for t, agent in live:
-                try:
-                    results.append((agent.act(t.payload), None))
-                except Exception as err:
-                    results.append((None, err))
-        for (t, _), (action, err) in zip(live, results):
-            if err is None:
-                try:
-                    t.result = {"action": encode_action(validate_action(action))}
-                except (AgentError, ProtocolError) as bad:
-                    t.status, t.error = 422, str(bad)
-            elif isinstance(err, AgentError):
-                t.status, t.error = 422, str(err)
-            else:
-                t.status, t.error = 500, f"act() raised {_describe(err)}"
-            t.done.set()
-
+            self.run(tasks)
 
 class _Handler(BaseHTTPRequestHandler):
     """HTTP/1.1 keep-alive handler; every answer is a protocol message."""
@@ -254,7 +268,13 @@ class _Handler(BaseHTTPRequestHandler):
         task = self.owner.submit(_Task(kind, session, payload))
         if task.status != 200:
             return self._error(task.status, task.error)
-        self._send(200, message(**task.result))
+        if kind != "act":
+            return self._send(200, message())
+        try:
+            body = message(action=encode_action(task.result))
+        except ProtocolError as bad:
+            return self._error(422, str(bad))
+        self._send(200, body)
 
 
 def serve(spec: str, host: str = "127.0.0.1", port: int = 8765, max_batch: int = 8) -> None:

@@ -246,11 +246,18 @@ def export(trainer: Trainer, path: Path, meta: dict) -> None:
           "meta": meta}, path)
 
 
+#: rows of every forward pass on a GPU: batches are padded (or split) to it
+GPU_BATCH = 32
+
+
 class Policy:
     """Inference wrapper of an exported checkpoint (``torch.inference_mode``) on ``device``
     (``cpu``, ``cuda`` or ``auto``). The language vector of each distinct instruction text is
-    computed once and cached. On CPU a batch runs sample by sample, so that results are
-    bitwise those of single calls; on a GPU it runs in one pass (equal to float rounding)."""
+    computed once, alone, and cached. On CPU a batch runs sample by sample, so that results are
+    bitwise those of single calls. On a GPU a batch runs in forward passes of exactly
+    :data:`GPU_BATCH` rows (zero-padded), with cuDNN's deterministic algorithms and no TF32, so
+    that a sample's output does not depend on how many or which other samples share its batch;
+    GPU and CPU results differ by float rounding."""
 
     def __init__(self, path: Path, threads: int | None = 1, device: str = "cpu") -> None:
         ck = load(path)
@@ -264,6 +271,11 @@ class Policy:
         self.model.load_state_dict(ck["model"])
         self.model.eval()
         self.device = pick_device(device)
+        if self.device.type == "cuda":
+            torch.backends.cudnn.deterministic = True
+            torch.backends.cudnn.benchmark = False
+            torch.backends.cudnn.allow_tf32 = False
+            torch.backends.cuda.matmul.allow_tf32 = False
         self.model.to(self.device)
         self.text = self.cfg.text_encoder()
         self._lang: dict[str, torch.Tensor] = {}
@@ -271,12 +283,12 @@ class Policy:
     def language(self, texts: list[str]) -> torch.Tensor:
         """``(B, lang)`` language vectors of ``texts`` (cached per text)."""
         missing = [t for t in dict.fromkeys(texts) if t not in self._lang]
-        if missing:
+        if missing and len(self._lang) > 4096:
+            self._lang.clear()
+        for text in missing:  # one at a time: a text's vector never depends on the others
             with torch.inference_mode():
-                vecs = self.model.lang(torch.from_numpy(self.text.encode_many(missing)).to(self.device))
-            if len(self._lang) > 4096:
-                self._lang.clear()
-            self._lang.update(zip(missing, vecs))
+                ids = torch.from_numpy(self.text.encode_many([text])).to(self.device)
+                self._lang[text] = self.model.lang(ids)[0]
         return torch.stack([self._lang[t] for t in texts])
 
     def __call__(self, bev: np.ndarray, texts: list[str], speed: np.ndarray,
@@ -297,9 +309,21 @@ class Policy:
                         for i in range(len(b))]
                 out = {k: torch.cat([o[k] for o in outs]) for k in outs[0]}
             else:
-                out = self.model.fuse(b, lang, speed, stopped)
+                outs = [self._padded(b[i:i + GPU_BATCH], lang[i:i + GPU_BATCH], speed[i:i + GPU_BATCH],
+                                     stopped[i:i + GPU_BATCH]) for i in range(0, len(b), GPU_BATCH)]
+                out = {k: torch.cat([o[k] for o in outs]) for k in outs[0]}
             return {"waypoints": out["waypoints"].cpu().numpy(), "speed": out["speed"].cpu().numpy(),
                     "stop_prob": torch.sigmoid(out["stop"]).cpu().numpy()}
+
+    def _padded(self, bev: torch.Tensor, lang: torch.Tensor, speed: torch.Tensor,
+                stopped: torch.Tensor) -> dict[str, torch.Tensor]:
+        """One forward pass of exactly GPU_BATCH rows (zero rows appended); the first
+        ``len(bev)`` rows of each output."""
+        n, pad = len(bev), GPU_BATCH - len(bev)
+        if pad:
+            bev, lang, speed, stopped = (torch.cat([x, x.new_zeros((pad, *x.shape[1:]))])
+                                         for x in (bev, lang, speed, stopped))
+        return {k: v[:n] for k, v in self.model.fuse(bev, lang, speed, stopped).items()}
 
 
 def parameter_count(model: nn.Module) -> int:

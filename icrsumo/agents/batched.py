@@ -1,0 +1,255 @@
+"""Batched inference inside ``icrsumo evaluate --batch-inference DEVICE``: the simulator
+workers send their observations to one inference process that runs the agent's network for
+all of them in one forward pass.
+
+:func:`start_server` starts the inference process (``spawn``; ``ICRSUMO_AGENT_DEVICE`` =
+``device`` in it) for one agent spec. It listens on a Unix socket in a private folder (mode
+0700) and accepts only clients that know its random key (``multiprocessing.connection``'s
+HMAC handshake; the key reaches the forked episode workers through :data:`KEY_ENV`). Its loop
+is single-threaded: it waits until some workers' requests are ready, reads them all, runs
+them with :class:`icrsumo.agents.serve.BatchingCore` (one agent instance per episode, acts in
+batches of up to ``max_batch`` through the agent's ``act_batch`` hook) and answers. No
+request waits for a batch to fill: a batch is whatever arrived while the previous one ran.
+
+In the workers, the spec ``batched:SOCKET#NAME`` makes a :class:`BatchedAgent`: one episode
+session, one connection per worker process. Observations and actions travel pickled, raw
+(no compression): a BEV frame is 7 x 128 x 128 bytes. The server process is the only place
+that loads the network, so the workers' cores are left to SUMO and the runner.
+
+Results on CPU are those of the in-process agent, bit for bit (a learned agent runs a CPU
+batch sample by sample). On a GPU they differ from CPU inference by float rounding, and the
+learned agents pad every batch to a fixed size so that an episode's actions do not depend on
+which other episodes share its batch (:class:`icrsumo.learn.nets.Policy`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import multiprocessing
+import os
+import secrets
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from multiprocessing.connection import Client, Connection, Listener, wait
+from pathlib import Path
+from typing import Any
+
+from ..errors import InputError
+from .base import AgentError, EpisodeInfo, Observation
+
+#: agent spec prefix of a worker's client: ``batched:SOCKET#NAME``
+BATCHED_PREFIX = "batched:"
+#: environment variable carrying the hex key of the inference processes to the workers
+KEY_ENV = "ICRSUMO_BATCH_KEY"
+#: s to wait for an inference process to load its agent and listen
+START_TIMEOUT = 180.0
+KINDS = ("reset", "act", "close")
+#: agent name -> statistics of its last stopped inference process (for benchmarks)
+LAST_STATS: dict[str, dict] = {}
+
+
+@dataclass
+class BatchServer:
+    """The parent's handle of one inference process."""
+
+    spec: str
+    name: str
+    address: str
+    proc: Any
+    control: Connection
+    folder: tempfile.TemporaryDirectory
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def worker_spec(self) -> str:
+        """The agent spec the episode workers use to reach this process."""
+        return f"{BATCHED_PREFIX}{self.address}#{self.name}"
+
+    def stop(self) -> dict:
+        """Stop the process; returns its statistics: resets, acts, batches, largest_batch and
+        the seconds it spent waiting for requests, reading and answering them, and running
+        the agent (wait_s, io_s, run_s)."""
+        with contextlib.suppress(OSError, EOFError, BrokenPipeError):
+            self.control.send("stop")
+            if self.control.poll(30):
+                kind, payload = self.control.recv()
+                if kind == "stats":
+                    self.stats = payload
+        self.proc.join(timeout=30)
+        if self.proc.is_alive():
+            self.proc.kill()
+            self.proc.join()
+        self.control.close()
+        self.folder.cleanup()
+        LAST_STATS[self.name] = dict(self.stats)
+        return self.stats
+
+
+def start_server(spec: str, device: str, max_batch: int = 32) -> BatchServer:
+    """Start the inference process of agent ``spec`` on ``device`` (cpu, cuda, cuda:N, auto)
+    and wait until it listens. Errors (a privileged agent, no CUDA, ...) are InputErrors."""
+    from .registry import agent_factory, agent_name
+
+    factory = agent_factory(spec)
+    if getattr(factory, "privileged", False):
+        raise InputError("--batch-inference", spec, "is a privileged agent: it needs the simulator's "
+                         "World view, which only the episode worker has", "leave out --batch-inference")
+    name = agent_name(spec, factory)
+    key = bytes.fromhex(os.environ[KEY_ENV]) if os.environ.get(KEY_ENV) else secrets.token_bytes(32)
+    os.environ[KEY_ENV] = key.hex()
+    folder = tempfile.TemporaryDirectory(prefix="icrsumo-batch-")  # mode 0700
+    address = str(Path(folder.name) / "agent.sock")
+    ctx = multiprocessing.get_context("spawn")
+    control, child = ctx.Pipe()
+    proc = ctx.Process(target=_serve, args=(spec, address, key, device, max_batch, child),
+                       name=f"icrsumo-batch-{name}", daemon=True)
+    proc.start()
+    child.close()
+    status, payload = ("error", f"did not start within {START_TIMEOUT:g} s")
+    if control.poll(START_TIMEOUT):
+        with contextlib.suppress(EOFError):
+            status, payload = control.recv()
+    if status != "ready":
+        proc.kill()
+        proc.join()
+        control.close()
+        folder.cleanup()
+        raise InputError("--batch-inference", device, f"the inference process of {spec} failed: {payload}",
+                         "pick a device this machine has (cpu, cuda), or leave out --batch-inference")
+    return BatchServer(spec, name, address, proc, control, folder)
+
+
+def _serve(spec: str, address: str, key: bytes, device: str, max_batch: int, control: Connection) -> None:
+    """The inference process: load the agent, listen, answer batches until told to stop."""
+    from ..learn.agent import DEVICE_ENV
+    from .serve import BatchingCore, _describe, _Task
+
+    os.environ[DEVICE_ENV] = device
+    try:
+        if device.startswith("cuda"):
+            import torch
+
+            if not torch.cuda.is_available():
+                raise RuntimeError("CUDA is not available on this machine")
+        core = BatchingCore(spec, max_batch)
+        listener = Listener(address, family="AF_UNIX", authkey=key)
+    except Exception as err:  # reported to the parent as one line
+        control.send(("error", _describe(err)))
+        return
+    pending: list[Connection] = []
+    lock = threading.Lock()
+
+    def accept() -> None:
+        while True:
+            try:
+                conn = listener.accept()
+            except (OSError, EOFError, multiprocessing.AuthenticationError):
+                continue
+            with lock:
+                pending.append(conn)
+
+    threading.Thread(target=accept, name="icrsumo-batch-accept", daemon=True).start()
+    control.send(("ready", core.name))
+    conns: list[Connection] = []
+    times = {"wait_s": 0.0, "io_s": 0.0, "run_s": 0.0}
+    while True:
+        with lock:
+            conns.extend(pending)
+            pending.clear()
+        t0 = time.perf_counter()
+        ready = wait([control, *conns], timeout=0.05)
+        t1 = time.perf_counter()
+        times["wait_s"] += t1 - t0
+        if control in ready:
+            with contextlib.suppress(EOFError, OSError):
+                control.recv()
+            with contextlib.suppress(OSError):
+                control.send(("stats", {**core.stats, **{k: round(v, 3) for k, v in times.items()}}))
+            return
+        tasks: list[tuple[Connection, _Task]] = []
+        for conn in ready:
+            try:
+                kind, session, payload = conn.recv()
+            except (EOFError, OSError, ValueError, TypeError):  # a worker ended, or sent garbage
+                conns.remove(conn)
+                conn.close()
+                continue
+            task = _Task(str(kind), str(session), payload)
+            if kind not in KINDS:
+                task.status, task.error = 400, f"unknown request {kind!r} (use {', '.join(KINDS)})"
+            tasks.append((conn, task))
+        t2 = time.perf_counter()
+        core.run([t for _, t in tasks if t.status == 200])
+        t3 = time.perf_counter()
+        for conn, t in tasks:
+            try:
+                conn.send((t.status, t.result, t.error))
+            except OSError:  # the worker was killed meanwhile (e.g. its agent call timed out)
+                if conn in conns:
+                    conns.remove(conn)
+        times["run_s"] += t3 - t2
+        times["io_s"] += time.perf_counter() - t3 + t2 - t1
+
+
+# --------------------------------------------------------------------------- worker side
+_CONNS: dict[str, Connection] = {}
+_IDS = itertools.count()
+
+
+class BatchedAgent:
+    """An episode's agent in an episode worker: its calls go to the inference process."""
+
+    privileged = False
+
+    def __init__(self, address: str, name: str) -> None:
+        self.address, self.name = address, name
+        self.session: str | None = None
+
+    def _call(self, kind: str, session: str, payload: Any) -> Any:
+        try:
+            conn = _CONNS.get(self.address)
+            if conn is None:
+                conn = _CONNS[self.address] = Client(self.address, family="AF_UNIX",
+                                                     authkey=bytes.fromhex(os.environ.get(KEY_ENV, "")))
+            conn.send((kind, session, payload))
+            status, result, error = conn.recv()
+        except (OSError, EOFError, multiprocessing.AuthenticationError) as err:
+            _CONNS.pop(self.address, None)
+            raise AgentError(f"the batched inference process of {self.name} is not answering "
+                             f"({type(err).__name__}: {err})") from None
+        if status != 200:
+            raise AgentError(error)
+        return result
+
+    def reset(self, info: EpisodeInfo) -> None:
+        self.close()
+        session = f"{os.getpid()}-{next(_IDS)}-{time.monotonic_ns()}"  # an id only
+        self._call("reset", session, info)
+        self.session = session
+
+    def act(self, obs: Observation) -> Any:
+        if self.session is None:
+            raise AgentError("act() before reset()")
+        return self._call("act", self.session, obs)
+
+    def close(self) -> None:
+        """End the episode's session (best effort)."""
+        if self.session is not None:
+            session, self.session = self.session, None
+            with contextlib.suppress(AgentError):
+                self._call("close", session, None)
+
+
+class BatchedFactory:
+    """``agent_factory`` of ``batched:SOCKET#NAME``."""
+
+    privileged = False
+
+    def __init__(self, target: str) -> None:
+        self.address, _, self.name = target.partition("#")
+
+    def __call__(self) -> BatchedAgent:
+        return BatchedAgent(self.address, self.name)

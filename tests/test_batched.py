@@ -1,0 +1,101 @@
+"""`icrsumo evaluate --batch-inference`: one real inference process per agent, fed by the
+episode workers over a Unix socket (icrsumo.agents.batched)."""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from icrsumo.agents.base import AgentError, EpisodeInfo, Observation
+from icrsumo.agents.batched import BatchedAgent, start_server
+from icrsumo.agents.registry import make_agent
+from icrsumo.cache import bundled_route
+from icrsumo.cli import main
+from icrsumo.errors import InputError
+from icrsumo.evaluate import EvalOptions, evaluate
+
+INFO = EpisodeInfo("r", "town", "net.xml", 0.05, 0.1, 7)
+
+
+@pytest.fixture(scope="module")
+def suite(tmp_path_factory) -> Path:
+    """A convert-routes folder holding tiny_003 (the cached bundled route)."""
+    path = tmp_path_factory.getbasetemp() / "icrsumo_cache"
+    old = os.environ.get("ICRSUMO_CACHE")
+    os.environ["ICRSUMO_CACHE"] = str(path)
+    sc_dir, _ = bundled_route("tiny_003")
+    yield sc_dir.parents[1]
+    if old is None:
+        os.environ.pop("ICRSUMO_CACHE", None)
+    else:
+        os.environ["ICRSUMO_CACHE"] = old
+
+
+def _obs(t: float, text: str) -> Observation:
+    bev = np.zeros((7, 128, 128), np.uint8)
+    bev[0, 30:128, 48:80] = 255
+    bev[1, :, 63:65] = 255
+    return Observation(t=t, bev=bev, speed=2.5 + t % 1.0, instruction=text, instruction_id=0, notice="")
+
+
+def _rows(out: Path) -> list[tuple]:
+    with sqlite3.connect(out / "results.sqlite") as c:
+        return c.execute("SELECT * FROM episodes ORDER BY agent, route_id, family, k, seed").fetchall()
+
+
+def test_batched_cpu_evaluation_is_the_in_process_one(suite, tmp_path, capsys):
+    """A learned agent through one CPU inference process (2 workers batching into it) and a
+    privileged agent alongside (run by the workers as usual): stored episodes, logs and
+    summary.json byte-identical to the plain run."""
+    opts = dict(suite=str(suite), agents=("bev-ngram", "route-oracle"), families=("misleading",), k=2,
+                workers=2)
+    evaluate(EvalOptions(out=tmp_path / "plain", quiet=True, **opts))
+    evaluate(EvalOptions(out=tmp_path / "batched", batch_inference="cpu", max_batch=4, **opts))
+    err = capsys.readouterr().err
+    assert "batched inference of bev-ngram on cpu:" in err and "route-oracle on cpu" not in err
+    rows = _rows(tmp_path / "plain")
+    assert len(rows) == 6 and all("done" in r for r in rows)
+    assert _rows(tmp_path / "batched") == rows
+    assert (tmp_path / "batched" / "summary.json").read_bytes() == \
+        (tmp_path / "plain" / "summary.json").read_bytes()
+
+
+def test_client_matches_agent_and_reports_a_dead_server():
+    server = start_server("bev-ngram", "cpu", max_batch=8)
+    try:
+        remote, local = BatchedAgent(server.address, server.name), make_agent("bev-ngram")
+        for agent in (remote, local):
+            agent.reset(INFO)
+        texts = ["Turn left at the next intersection.", "In 30 meters, go straight."]
+        for i in range(6):
+            obs = _obs(20.0 + 0.1 * i, texts[i % 2])
+            a, b = remote.act(obs), local.act(obs)
+            assert np.array_equal(a.waypoints, b.waypoints) and a.target_speed == b.target_speed
+        remote.close()
+        with pytest.raises(AgentError, match="act\\(\\) before reset"):
+            remote.act(_obs(21.0, texts[0]))
+        server.proc.kill()
+        server.proc.join()
+        with pytest.raises(AgentError, match="batched inference process of bev-ngram is not answering"):
+            remote.reset(INFO)
+    finally:
+        stats = server.stop()
+    assert stats == {} or stats["acts"] == 6
+
+
+def test_bad_batch_inference_options(suite, tmp_path, capsys):
+    with pytest.raises(InputError, match="local backend only"):
+        EvalOptions(out=tmp_path, suite=str(suite), backend="ray", batch_inference="cpu").check()
+    with pytest.raises(InputError, match="privileged agent"):
+        start_server("route-oracle", "cpu")
+    if not __import__("torch").cuda.is_available():
+        code = main(["evaluate", "--suite", str(suite), "--agent", "bev-ngram", "--family", "noise",
+                     "--k", "1", "--batch-inference", "cuda", "--out", str(tmp_path / "o"), "--quiet"])
+        err = capsys.readouterr().err
+        assert code == 2 and "CUDA is not available" in err and "Traceback" not in err
+        assert len(err.strip().splitlines()) == 1
+        assert not (tmp_path / "o" / "results.sqlite").exists() or _rows(tmp_path / "o") == []
