@@ -3,8 +3,11 @@ episode workers over a Unix socket (icrsumo.agents.batched)."""
 
 from __future__ import annotations
 
+import json
 import os
 import sqlite3
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -99,3 +102,21 @@ def test_bad_batch_inference_options(suite, tmp_path, capsys):
         assert code == 2 and "CUDA is not available" in err and "Traceback" not in err
         assert len(err.strip().splitlines()) == 1
         assert not (tmp_path / "o" / "results.sqlite").exists() or _rows(tmp_path / "o") == []
+
+
+def test_closed_loop_script_runs_on_cpu(suite, tmp_path):
+    """tools/batched_closed_loop.py end to end on CPU (in-process, the inference process and
+    serve-agent): the same episodes in every setup, one JSON line (no timing assertions)."""
+    script = Path(__file__).resolve().parents[1] / "tools" / "batched_closed_loop.py"
+    proc = subprocess.run(
+        [sys.executable, str(script), "--suite-dir", str(suite), "--agent", "bev-token", "--workers", "2",
+         "--device", "cpu", "--families", "noise", "--k", "1", "--routes", "tiny_003",
+         "--modes", "inprocess-cpu,ipc,batched@1",
+         "--work", str(tmp_path / "w")], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    res = json.loads(proc.stdout.strip().splitlines()[-1])
+    modes = res["modes"]
+    assert set(modes) == {"inprocess-cpu", "ipc", "batched@1"}
+    assert all(m["episodes"] == 2 and m["crashed"] == 0 and m["same_as_cpu"] == 2 for m in modes.values())
+    assert modes["batched@1"]["workers"] == 1 and modes["ipc"]["mean_batch"]["median"] >= 1.0
+    assert "| ipc | 2 | 2 |" in proc.stdout
