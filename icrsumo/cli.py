@@ -105,7 +105,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         routes=_split_list(args.routes) or None, workers=args.workers, backend=args.backend,
         address=args.address, traffic=args.traffic, quiet=args.quiet, rollout_route=args.rollout_route,
         agent_timeout=args.agent_timeout or None, batch_inference=args.batch_inference,
-        max_batch=args.max_batch,
+        max_batch=args.max_batch, inference_processes=args.inference_processes,
     )
     t0 = time.perf_counter()
     summary = evaluate(opts)
@@ -269,6 +269,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "its own agent)")
     v.add_argument("--max-batch", type=int, default=32, metavar="N",
                    help="observations per forward pass with --batch-inference (default 32)")
+    v.add_argument("--inference-processes", type=int, default=1, metavar="N",
+                   help="inference processes per agent with --batch-inference, each serving a share "
+                   "of the workers (default 1)")
     v.add_argument("--agent-timeout", type=float, default=60.0, metavar="S",
                    help="seconds an agent's reset/act call may take before the episode is stored as "
                    "crashed (default 60; 0: no limit)")

@@ -76,6 +76,8 @@ class EvalOptions:
     #: runs its own agent), e.g. "cuda"; ``max_batch``: observations per forward pass
     batch_inference: str | None = None
     max_batch: int = 32
+    #: inference processes per agent with ``batch_inference`` (each worker uses one)
+    inference_processes: int = 1
 
     def check(self) -> None:
         bad = [f for f in self.families if f not in FAMILIES]
@@ -101,6 +103,9 @@ class EvalOptions:
             if self.max_batch < 1:
                 raise InputError("--max-batch", str(self.max_batch), "must be at least 1",
                                  "give a positive count")
+            if self.inference_processes < 1:
+                raise InputError("--inference-processes", str(self.inference_processes),
+                                 "must be at least 1", "give a positive count")
         p = Path(self.suite)
         if self.suite not in bundled_suites() and not p.is_file() and not (p / "index.json").is_file():
             raise InputError("--suite", self.suite, "unknown suite",
@@ -452,7 +457,8 @@ def evaluate(opts: EvalOptions) -> dict:
             for server in servers.values():
                 s = server.stop()
                 if s and not opts.quiet:
-                    print(f"icrsumo: batched inference of {server.name} on {opts.batch_inference}: "
+                    print(f"icrsumo: batched inference of {server.name} on {opts.batch_inference} "
+                          f"({s['processes']} process{'es' if s['processes'] > 1 else ''}): "
                           f"{s['acts']} actions in {s['batches']} forward passes (mean batch "
                           f"{s['acts'] / max(s['batches'], 1):.1f}, largest {s['largest_batch']})",
                           file=sys.stderr)
@@ -463,17 +469,18 @@ def evaluate(opts: EvalOptions) -> dict:
 
 
 def _start_batch_servers(opts: EvalOptions, todo: list[Job]) -> dict:
-    """One batched inference process per non-privileged agent spec of ``todo`` (spec ->
-    :class:`icrsumo.agents.batched.BatchServer`), when ``opts.batch_inference`` is set."""
+    """The batched inference processes of each non-privileged agent spec of ``todo`` (spec ->
+    :class:`icrsumo.agents.batched.ServerGroup`), when ``opts.batch_inference`` is set."""
     if opts.batch_inference is None or not todo:
         return {}
-    from .agents.batched import start_server
+    from .agents.batched import start_group
 
     servers: dict = {}
     try:
         for spec in dict.fromkeys(j.agent_spec for j in todo):
             if not getattr(agent_factory(spec), "privileged", False):
-                servers[spec] = start_server(spec, opts.batch_inference, opts.max_batch)
+                servers[spec] = start_group(spec, opts.batch_inference, opts.max_batch,
+                                            opts.inference_processes)
     except BaseException:
         for server in servers.values():
             server.stop()

@@ -57,9 +57,10 @@ def test_batched_cpu_evaluation_is_the_in_process_one(suite, tmp_path, capsys):
     opts = dict(suite=str(suite), agents=("bev-ngram", "route-oracle"), families=("misleading",), k=2,
                 workers=2)
     evaluate(EvalOptions(out=tmp_path / "plain", quiet=True, **opts))
-    evaluate(EvalOptions(out=tmp_path / "batched", batch_inference="cpu", max_batch=4, **opts))
+    evaluate(EvalOptions(out=tmp_path / "batched", batch_inference="cpu", max_batch=4,
+                         inference_processes=2, **opts))
     err = capsys.readouterr().err
-    assert "batched inference of bev-ngram on cpu:" in err and "route-oracle on cpu" not in err
+    assert "batched inference of bev-ngram on cpu (2 processes):" in err and "route-oracle on cpu" not in err
     rows = _rows(tmp_path / "plain")
     assert len(rows) == 6 and all("done" in r for r in rows)
     assert _rows(tmp_path / "batched") == rows
@@ -91,6 +92,8 @@ def test_client_matches_agent_and_reports_a_dead_server():
 
 
 def test_bad_batch_inference_options(suite, tmp_path, capsys):
+    with pytest.raises(InputError, match="must be at least 1"):
+        EvalOptions(out=tmp_path, suite=str(suite), batch_inference="cpu", inference_processes=0).check()
     with pytest.raises(InputError, match="local backend only"):
         EvalOptions(out=tmp_path, suite=str(suite), backend="ray", batch_inference="cpu").check()
     with pytest.raises(InputError, match="privileged agent"):

@@ -21,7 +21,8 @@ episode, and the agent is queried at 10 Hz. Modes (``--modes``, comma-separated)
 * ``ipc-unbatched``: the same with ``--max-batch 1``.
 
 A mode may name its own worker count, ``MODE@N`` (e.g. ``ipc@24``: more episode workers than
-cores, so that a worker's wait for the GPU is another worker's turn on a core).
+cores, so that a worker's wait for the GPU is another worker's turn on a core), and an ``ipc``
+mode its inference processes, ``ipc@NxP`` (``--inference-processes P``).
 
 Each run gets a fresh out folder holding the converted suite (``--suite-dir``: the
 ``scenarios`` folder of an earlier ``icrsumo evaluate`` or ``convert-routes`` output, so the
@@ -42,7 +43,6 @@ import json
 import os
 import shutil
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -53,7 +53,7 @@ for p in (ROOT, ROOT / "tools"):
     if str(p) not in sys.path:
         sys.path.insert(0, str(p))
 
-from batched_inference import _get_info, _start_server, fmt, machine, stat  # noqa: E402
+from batched_inference import _get_info, _start_server, _stop_server, fmt, machine, stat  # noqa: E402
 
 MODES = ("inprocess-cpu", "inprocess-cuda", "batched", "unbatched", "ipc", "ipc-unbatched")
 
@@ -76,6 +76,7 @@ def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log
 
     shutil.copytree(prep, run_dir)
     mode, _, n = mode.partition("@")
+    n, _, procs = n.partition("x")
     workers = int(n) if n else args.workers
     served = mode in ("batched", "unbatched")
     proc, spec = None, args.agent
@@ -91,6 +92,7 @@ def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log
                            workers=workers, quiet=True,
                            max_batch=1 if mode == "ipc-unbatched" else args.batch,
                            batch_inference=args.device if mode.startswith("ipc") else None,
+                           inference_processes=int(procs) if procs else 1,
                            routes=tuple(args.routes.split(",")) if args.routes else None)
         s0 = _get_info(url)["stats"] if served else None
         t1 = time.perf_counter()
@@ -105,11 +107,7 @@ def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log
         else:
             os.environ[DEVICE_ENV] = old_env
         if proc is not None:
-            proc.terminate()
-            try:
-                proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+            _stop_server(proc)
     with ResultStore(run_dir / "results.sqlite") as store:
         recs = store.records()
     n = summary["episodes"]["done"] + summary["episodes"]["crashed"]
@@ -125,6 +123,7 @@ def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log
         served = bool(s1)
     if served:
         d_acts, d_batches = s1["acts"] - s0["acts"], s1["batches"] - s0["batches"]
+        res["processes"] = s1.get("processes", 1)
         res["acts"] = d_acts
         res["mean_batch"] = d_acts / d_batches if d_batches else None
         res["largest_batch"] = s1["largest_batch"]
@@ -155,8 +154,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path, help="also write the JSON line here")
     args = ap.parse_args(argv)
     modes = [m for m in args.modes.split(",") if m]
-    bad = [m for m in modes if m.partition("@")[0] not in MODES or not m.partition("@")[2].isdigit()
-           and "@" in m]
+    bad = [m for m in modes if m.partition("@")[0] not in MODES
+           or "@" in m and not m.partition("@")[2].replace("x", "", 1).isdigit()]
     if bad:
         ap.error(f"unknown mode {bad[0]}: use {', '.join(MODES)}")
     work = args.work or Path(tempfile.mkdtemp(prefix="icrsumo-bcl-"))
@@ -226,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
     split = [m for m in modes if "server_run_s" in out["modes"][m]]
     if split:
         print()
-        print("| inference process (ipc) | workers | running the agent s | reading + answering s | "
+        print("| inference processes (ipc, summed) | workers | running the agent s | reading + answering s | "
               "waiting for requests s |")
         print("|---|---:|---:|---:|---:|")
         for mode in split:

@@ -207,6 +207,15 @@ def _start_server(cfg: dict, max_batch: int, log) -> tuple[subprocess.Popen, str
             time.sleep(0.1)
 
 
+def _stop_server(proc: subprocess.Popen) -> None:
+    """Stop a serve-agent process (SIGTERM, then SIGKILL after 30 s)."""
+    proc.terminate()
+    try:
+        proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+
+
 def run_mode(mode: str, args: argparse.Namespace, files: list[str], log) -> dict:
     """One measurement of ``mode``: {acts_per_s, mean_batch, lat_ms, ...}."""
     served = mode in ("batched", "unbatched")
@@ -244,11 +253,7 @@ def run_mode(mode: str, args: argparse.Namespace, files: list[str], log) -> dict
             if w.is_alive():
                 w.kill()
         if proc is not None:
-            proc.terminate()
-            try:
-                proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+            _stop_server(proc)
     errors = [r["error"] for r in results if "error" in r]
     if errors:
         raise RuntimeError(f"{mode}: {errors[0]}")

@@ -11,10 +11,12 @@ them with :class:`icrsumo.agents.serve.BatchingCore` (one agent instance per epi
 batches of up to ``max_batch`` through the agent's ``act_batch`` hook) and answers. No
 request waits for a batch to fill: a batch is whatever arrived while the previous one ran.
 
-In the workers, the spec ``batched:SOCKET#NAME`` makes a :class:`BatchedAgent`: one episode
-session, one connection per worker process. Observations and actions travel pickled, raw
-(no compression): a BEV frame is 7 x 128 x 128 bytes. The server process is the only place
-that loads the network, so the workers' cores are left to SUMO and the runner.
+``processes`` > 1 starts several such processes per agent (:func:`start_group`); each worker
+uses one. In the workers, the spec ``batched:SOCKET[,SOCKET...]#NAME`` makes a
+:class:`BatchedAgent`: one episode session, one connection per worker process. Observations
+and actions travel pickled, raw (no compression): a BEV frame is 7 x 128 x 128 bytes. The
+inference processes are the only ones that load the network, so the workers' cores are left to
+SUMO and the runner.
 
 Results on CPU are those of the in-process agent, bit for bit (a learned agent runs a CPU
 batch sample by sample). On a GPU they differ from CPU inference by float rounding, and the
@@ -40,7 +42,7 @@ from typing import Any
 from ..errors import InputError
 from .base import AgentError, EpisodeInfo, Observation
 
-#: agent spec prefix of a worker's client: ``batched:SOCKET#NAME``
+#: agent spec prefix of a worker's client: ``batched:SOCKET[,SOCKET...]#NAME``
 BATCHED_PREFIX = "batched:"
 #: environment variable carrying the hex key of the inference processes to the workers
 KEY_ENV = "ICRSUMO_BATCH_KEY"
@@ -84,8 +86,47 @@ class BatchServer:
             self.proc.join()
         self.control.close()
         self.folder.cleanup()
-        LAST_STATS[self.name] = dict(self.stats)
         return self.stats
+
+
+@dataclass
+class ServerGroup:
+    """Several inference processes of one agent: each episode worker uses one of them (by
+    process id), so that request handling, which is Python work, runs on several cores."""
+
+    name: str
+    servers: list[BatchServer]
+
+    @property
+    def worker_spec(self) -> str:
+        """The agent spec the episode workers use: ``batched:SOCKET[,SOCKET...]#NAME``."""
+        return f"{BATCHED_PREFIX}{','.join(s.address for s in self.servers)}#{self.name}"
+
+    def stop(self) -> dict:
+        """Stop every process; returns their statistics added up (largest_batch: the largest)."""
+        parts = [s.stop() for s in self.servers]
+        total: dict = {}
+        for part in parts:
+            for key, value in part.items():
+                total[key] = max(total.get(key, 0), value) if key == "largest_batch" else \
+                    total.get(key, 0) + value
+        if total:
+            total["processes"] = len(parts)
+        LAST_STATS[self.name] = total
+        return total
+
+
+def start_group(spec: str, device: str, max_batch: int = 32, processes: int = 1) -> ServerGroup:
+    """``processes`` inference processes of agent ``spec`` (see :func:`start_server`)."""
+    servers: list[BatchServer] = []
+    try:
+        for _ in range(processes):
+            servers.append(start_server(spec, device, max_batch))
+    except BaseException:
+        for server in servers:
+            server.stop()
+        raise
+    return ServerGroup(servers[0].name, servers)
 
 
 def start_server(spec: str, device: str, max_batch: int = 32) -> BatchServer:
@@ -244,12 +285,14 @@ class BatchedAgent:
 
 
 class BatchedFactory:
-    """``agent_factory`` of ``batched:SOCKET#NAME``."""
+    """``agent_factory`` of ``batched:SOCKET[,SOCKET...]#NAME``: a worker process always uses
+    the same inference process (its process id modulo their number)."""
 
     privileged = False
 
     def __init__(self, target: str) -> None:
-        self.address, _, self.name = target.partition("#")
+        addresses, _, self.name = target.partition("#")
+        self.addresses = addresses.split(",")
 
     def __call__(self) -> BatchedAgent:
-        return BatchedAgent(self.address, self.name)
+        return BatchedAgent(self.addresses[os.getpid() % len(self.addresses)], self.name)
