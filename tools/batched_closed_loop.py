@@ -70,6 +70,7 @@ def prepare(suite_dir: Path, work: Path, families: tuple[str, ...], k: int) -> P
 
 def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log) -> tuple[dict, dict]:
     """One ICR run of ``mode``: (measurements, {episode key: (ds, rc, termination)})."""
+    from icrsumo.agents.batched import LAST_STATS
     from icrsumo.evaluate import EvalOptions, evaluate
     from icrsumo.learn.agent import DEVICE_ENV
     from icrsumo.store import ResultStore
@@ -94,11 +95,12 @@ def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log
                            batch_inference=args.device if mode.startswith("ipc") else None,
                            inference_processes=int(procs) if procs else 1,
                            routes=tuple(args.routes.split(",")) if args.routes else None)
-        s0 = _get_info(url)["stats"] if served else None
+        s0 = _get_info(url)["stats"] if served else {"acts": 0, "batches": 0}
         t1 = time.perf_counter()
         summary = evaluate(opts)
         t2 = time.perf_counter()
-        s1 = _get_info(url)["stats"] if served else None
+        # the server's counters (HTTP), or those of evaluate's inference processes (ipc)
+        s1 = _get_info(url)["stats"] if served else LAST_STATS.pop(args.agent, None)
         evaluate(opts)  # all stored: reuse checks, generation, reports
         t3 = time.perf_counter()
     finally:
@@ -116,12 +118,7 @@ def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log
            "episodes_s": episodes_s, "episodes_per_s": n / episodes_s,
            "sim_s_per_wall_s": sum(r.duration for r in recs) / episodes_s,
            "mean_DS": statistics.fmean(r.ds for r in recs) if recs else None}
-    if mode.startswith("ipc"):
-        from icrsumo.agents.batched import LAST_STATS
-
-        s0, s1 = {"acts": 0, "batches": 0}, LAST_STATS.get(args.agent, {})
-        served = bool(s1)
-    if served:
+    if s1:
         d_acts, d_batches = s1["acts"] - s0["acts"], s1["batches"] - s0["batches"]
         res["processes"] = s1.get("processes", 1)
         res["acts"] = d_acts
@@ -132,6 +129,15 @@ def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log
                 res[f"server_{key}"] = s1[key]
     episodes = {(r.route_id, r.family, r.k, r.seed): (r.ds, r.rc, r.termination) for r in recs}
     return res, episodes
+
+
+def print_table(header: list[str], rows: list[list]) -> None:
+    """A Markdown table after a blank line; columns after the first right-aligned."""
+    print()
+    print("| " + " | ".join(header) + " |")
+    print("|---|" + "---:|" * (len(header) - 1))
+    for row in rows:
+        print("| " + " | ".join(str(c) for c in row) + " |")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -193,10 +199,9 @@ def main(argv: list[str] | None = None) -> int:
         row["episodes"] = rs[0]["episodes"]
         row["crashed"] = rs[0]["crashed"]
         row["workers"] = rs[0]["workers"]
-        if ref is not None:
-            row["same_as_cpu"] = sum(episodes[mode].get(key) == v for key, v in ref.items())
-        if ipc is not None:
-            row["same_as_ipc"] = sum(episodes[mode].get(key) == v for key, v in ipc.items())
+        for label, other in (("same_as_cpu", ref), ("same_as_ipc", ipc)):
+            if other is not None:
+                row[label] = sum(episodes[mode].get(key) == v for key, v in other.items())
         out["modes"][mode] = row
     base = {m: out["modes"][m]["episodes_per_s"]["median"] for m in modes}
     for mode in modes:
@@ -208,30 +213,24 @@ def main(argv: list[str] | None = None) -> int:
     print(f"machine: {m.get('gpu', 'no GPU')}, {m['cpus']} CPUs, Python {m['python']}, torch "
           f"{m.get('torch')}; agent {args.agent}, {args.workers} episode workers, families "
           f"{','.join(args.families)}, K = {args.k}, {args.repeats} repeat(s)")
-    print()
-    print("| setup | workers | episodes | wall s | episodes/s | sim s per wall s | mean batch | × unbatched "
-          "| × in-process CPU | mean DS | same as CPU | same as ipc |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for mode in modes:
-        r = out["modes"][mode]
-        xu = f"{r['x_unbatched']:.2f}" if "x_unbatched" in r else "—"
-        xc = f"{r['x_inprocess-cpu']:.2f}" if "x_inprocess-cpu" in r else "—"
-        same = f"{r['same_as_cpu']}/{r['episodes']}" if "same_as_cpu" in r else "—"
-        same_ipc = f"{r['same_as_ipc']}/{r['episodes']}" if "same_as_ipc" in r else "—"
-        print(f"| {mode} | {r['workers']} | {r['episodes']} | {fmt(r['wall_s'], 1)} | "
-              f"{fmt(r['episodes_per_s'], 2)} | {fmt(r['sim_s_per_wall_s'], 0)} | "
-              f"{fmt(r['mean_batch'], 2)} | {xu} | {xc} | "
-              f"{fmt(r['mean_DS'], 1, rng=False)} | {same} | {same_ipc} |")
-    split = [m for m in modes if "server_run_s" in out["modes"][m]]
+
+    def ratio(r: dict, key: str) -> str:
+        return f"{r[key]:.2f}" if key in r else "—"
+
+    def same(r: dict, key: str) -> str:
+        return f"{r[key]}/{r['episodes']}" if key in r else "—"
+
+    rows = [[mode, r["workers"], r["episodes"], fmt(r["wall_s"], 1), fmt(r["episodes_per_s"], 2),
+             fmt(r["sim_s_per_wall_s"], 0), fmt(r["mean_batch"], 2), ratio(r, "x_unbatched"),
+             ratio(r, "x_inprocess-cpu"), fmt(r["mean_DS"], 1, rng=False), same(r, "same_as_cpu"),
+             same(r, "same_as_ipc")] for mode, r in out["modes"].items()]
+    print_table(["setup", "workers", "episodes", "wall s", "episodes/s", "sim s per wall s", "mean batch",
+                 "× unbatched", "× in-process CPU", "mean DS", "same as CPU", "same as ipc"], rows)
+    split = [[mode, r["workers"], fmt(r["server_run_s"], 1), fmt(r["server_io_s"], 1),
+              fmt(r["server_wait_s"], 1)] for mode, r in out["modes"].items() if "server_run_s" in r]
     if split:
-        print()
-        print("| inference processes (ipc, summed) | workers | running the agent s | reading + answering s | "
-              "waiting for requests s |")
-        print("|---|---:|---:|---:|---:|")
-        for mode in split:
-            r = out["modes"][mode]
-            print(f"| {mode} | {r['workers']} | {fmt(r['server_run_s'], 1)} | {fmt(r['server_io_s'], 1)} | "
-                  f"{fmt(r['server_wait_s'], 1)} |")
+        print_table(["inference processes (ipc, summed)", "workers", "running the agent s",
+                     "reading + answering s", "waiting for requests s"], split)
     line = json.dumps(out, sort_keys=True)
     print()
     print(line)

@@ -57,18 +57,12 @@ LAST_STATS: dict[str, dict] = {}
 class BatchServer:
     """The parent's handle of one inference process."""
 
-    spec: str
     name: str
     address: str
     proc: Any
     control: Connection
     folder: tempfile.TemporaryDirectory
     stats: dict = field(default_factory=dict)
-
-    @property
-    def worker_spec(self) -> str:
-        """The agent spec the episode workers use to reach this process."""
-        return f"{BATCHED_PREFIX}{self.address}#{self.name}"
 
     def stop(self) -> dict:
         """Stop the process; returns its statistics: resets, acts, batches, largest_batch and
@@ -160,7 +154,7 @@ def start_server(spec: str, device: str, max_batch: int = 32) -> BatchServer:
         folder.cleanup()
         raise InputError("--batch-inference", device, f"the inference process of {spec} failed: {payload}",
                          "pick a device this machine has (cpu, cuda), or leave out --batch-inference")
-    return BatchServer(spec, name, address, proc, control, folder)
+    return BatchServer(name, address, proc, control, folder)
 
 
 def _serve(spec: str, address: str, key: bytes, device: str, max_batch: int, control: Connection) -> None:

@@ -215,6 +215,7 @@ class AgentServer(BatchingCore):
                 tasks.append(nxt)
             self.run(tasks)
 
+
 class _Handler(BaseHTTPRequestHandler):
     """HTTP/1.1 keep-alive handler; every answer is a protocol message."""
 

@@ -307,11 +307,10 @@ class Policy:
                 # differently for other batch sizes); batching pays off on a GPU only
                 outs = [self.model.fuse(b[i:i + 1], lang[i:i + 1], speed[i:i + 1], stopped[i:i + 1])
                         for i in range(len(b))]
-                out = {k: torch.cat([o[k] for o in outs]) for k in outs[0]}
             else:
                 outs = [self._padded(b[i:i + GPU_BATCH], lang[i:i + GPU_BATCH], speed[i:i + GPU_BATCH],
                                      stopped[i:i + GPU_BATCH]) for i in range(0, len(b), GPU_BATCH)]
-                out = {k: torch.cat([o[k] for o in outs]) for k in outs[0]}
+            out = {k: torch.cat([o[k] for o in outs]) for k in outs[0]}
             return {"waypoints": out["waypoints"].cpu().numpy(), "speed": out["speed"].cpu().numpy(),
                     "stop_prob": torch.sigmoid(out["stop"]).cpu().numpy()}
 
