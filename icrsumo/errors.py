@@ -23,3 +23,13 @@ class InputError(Exception):
         if self.fix:
             text += f" (fix: {self.fix})"
         return " ".join(text.split())
+
+
+def describe(err: BaseException) -> str:
+    """``Type: message at file.py:line`` (the innermost frame): how a failure that is stored or
+    sent on (a crashed episode, an agent server's answer) names itself in one line."""
+    import traceback
+
+    tb = traceback.extract_tb(err.__traceback__)
+    where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
+    return f"{type(err).__name__}: {err}{where}"

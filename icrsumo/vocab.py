@@ -1,0 +1,118 @@
+"""Every vocabulary of icrsumo, defined once: event kinds, terminations and their classes,
+instruction families, intents, episode statuses and error kinds.
+
+Members are :class:`enum.StrEnum`: each is its value as a string (``EventKind.RED_LIGHT ==
+"red_light"``, ``str()`` and f-strings give the value, JSON writes the value), so stored files
+and tables are the same text as before the enums existed, and a string read from a file
+converts with ``EventKind(text)`` (a ``ValueError`` names an unknown value).
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+
+class EventKind(StrEnum):
+    """What an :class:`~icrsumo.types.Event` records. Penalised (Leaderboard 1.0): the
+    collisions, red lights and stop signs; recorded only: the rest."""
+
+    COLLISION_PEDESTRIAN = "collision_pedestrian"
+    COLLISION_VEHICLE = "collision_vehicle"
+    COLLISION_STATIC = "collision_static"
+    RED_LIGHT = "red_light"
+    STOP_SIGN = "stop_sign"
+    WRONG_WAY = "wrong_way"
+    LANE_INVASION = "lane_invasion"
+    TELEPORT_BACKGROUND = "teleport_background"
+    EGO_TELEPORT = "ego_teleport"
+    SIM_ERROR = "sim_error"
+
+
+class TerminationClass(StrEnum):
+    """ICR-Drive's failure classes: done, route deviation (RD) or timeout-like (TO)."""
+
+    DONE = "done"
+    RD = "RD"
+    TO = "TO"
+
+
+class Termination(StrEnum):
+    """Why an episode ended. completed: the route's end was reached; route_deviation: more than
+    30 m from the route; agent_blocked: under 0.1 m/s for 180 s; route_timeout: 0.8 s per metre
+    + 5 s elapsed; stuck: SUMO teleported the ego; sim_error: the simulator failed."""
+
+    COMPLETED = "completed"
+    ROUTE_DEVIATION = "route_deviation"
+    AGENT_BLOCKED = "agent_blocked"
+    ROUTE_TIMEOUT = "route_timeout"
+    STUCK = "stuck"
+    SIM_ERROR = "sim_error"
+
+    @property
+    def cls(self) -> TerminationClass:
+        """The ICR-Drive class of this termination."""
+        return TERMINATION_CLASS[self]
+
+
+#: termination -> its ICR-Drive class
+TERMINATION_CLASS: dict[Termination, TerminationClass] = {
+    Termination.COMPLETED: TerminationClass.DONE,
+    Termination.ROUTE_DEVIATION: TerminationClass.RD,
+    Termination.AGENT_BLOCKED: TerminationClass.TO,
+    Termination.ROUTE_TIMEOUT: TerminationClass.TO,
+    Termination.STUCK: TerminationClass.TO,
+    Termination.SIM_ERROR: TerminationClass.TO,
+}
+
+
+class Family(StrEnum):
+    """An instruction sequence's family: the baseline or one of ICR-Drive's four
+    counterfactual families."""
+
+    BASELINE = "baseline"
+    PARAPHRASE = "paraphrase"
+    AMBIGUITY = "ambiguity"
+    NOISE = "noise"
+    MISLEADING = "misleading"
+
+
+#: the four counterfactual families, in the paper's order
+FAMILIES: tuple[Family, ...] = (Family.PARAPHRASE, Family.AMBIGUITY, Family.NOISE, Family.MISLEADING)
+
+
+class Intent(StrEnum):
+    """What an instruction asks the driver to do next."""
+
+    LEFT = "left"
+    RIGHT = "right"
+    STRAIGHT = "straight"
+    FOLLOW = "follow"
+    LANE_LEFT = "lane_left"
+    LANE_RIGHT = "lane_right"
+    STOP = "stop"
+    UNKNOWN = "unknown"
+
+
+class EpisodeStatus(StrEnum):
+    """A stored episode: ``done`` (scored) or ``crashed`` (the agent or the simulator failed)."""
+
+    DONE = "done"
+    CRASHED = "crashed"
+
+
+class ErrorKind(StrEnum):
+    """Why an episode produced no log: ``agent_timeout`` (an agent call overran its limit: not
+    retried), ``worker_died`` (the worker process exited), ``error`` (anything raised)."""
+
+    ERROR = "error"
+    AGENT_TIMEOUT = "agent_timeout"
+    WORKER_DIED = "worker_died"
+
+
+class OutcomeStatus(StrEnum):
+    """What running one episode job gave: ``done`` (a log and a record), ``crashed`` (an error
+    of ``ErrorKind``), ``timed_out`` (an agent call overran ``--agent-timeout``)."""
+
+    DONE = "done"
+    CRASHED = "crashed"
+    TIMED_OUT = "timed_out"
