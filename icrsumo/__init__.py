@@ -1,3 +1,42 @@
-"""icrsumo: instruction-robustness evaluation of language-conditioned driving agents on SUMO."""
+"""icrsumo: instruction-robustness evaluation of language-conditioned driving agents on SUMO.
+
+The Python API (:mod:`icrsumo.api`) is exported here and imported on first use, so that
+``import icrsumo`` stays light: ``icrsumo.evaluate(...)``, ``icrsumo.load_suite(...)``,
+``icrsumo.run_episode(...)``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
+
+#: public name -> the module that defines it (imported on first access)
+_LAZY = {
+    "evaluate": "icrsumo.api",
+    "load_suite": "icrsumo.api",
+    "Suite": "icrsumo.api",
+    "EvalResult": "icrsumo.evaluation.run",
+    "run_episode": "icrsumo.api",
+}
+
+__all__ = ["EvalResult", "Suite", "__version__", "evaluate", "load_suite", "run_episode"]
+
+if TYPE_CHECKING:
+    from .api import Suite, evaluate, load_suite, run_episode
+    from .evaluation.run import EvalResult
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'icrsumo' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # later accesses skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_LAZY})

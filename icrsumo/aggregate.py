@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 
 from .types import EpisodeRecord
+from .vocab import FAMILIES, Family
 
-FAMILIES = ("paraphrase", "ambiguity", "noise", "misleading")
-BASELINE = "baseline"
+BASELINE = Family.BASELINE
 
 _Key = tuple[str, int]  # (route_id, seed): the pairing unit
 

@@ -67,8 +67,9 @@ def _cmd_run_episode(args: argparse.Namespace) -> int:
     from .instructions.store import read_instruction_sets
     from .logs import result_to_dict, write_log
     from .metrics import score_episode
-    from .runner import RunOptions, run_episode
     from .scenario import read_scenario
+    from .sim.callbacks import VideoRecorder
+    from .sim.episode import run_episode
 
     sc = read_scenario(Path(args.scenario))
     sets = read_instruction_sets(Path(args.instructions))
@@ -79,14 +80,14 @@ def _cmd_run_episode(args: argparse.Namespace) -> int:
                          f"pick one of {', '.join(have[:6])}, ...")
     args.agent = args.agent or DEFAULT_AGENT
     agent = make_agent(args.agent)
-    log = run_episode(sc, chosen[0], agent, RunOptions(video=Path(args.video) if args.video else None))
+    log = run_episode(sc, chosen[0], agent, callbacks=[VideoRecorder(Path(args.video))] if args.video else ())
     result = score_episode(log)
     if args.log:
         write_log(Path(args.log), log)
     r = result_to_dict(result)
     print(f"{sc.route_id} {args.agent} {args.family}:{chosen[0].k}  DS {r['ds']:.1f}  RC {r['rc']:.1f}  "
           f"IS {r['is']:.3f}  {result.termination} ({result.termination_class.value})  "
-          f"infractions {[i.kind for i in result.infractions]}")
+          f"infractions {[str(i.kind) for i in result.infractions]}")
     return 0
 
 
@@ -95,28 +96,24 @@ def _split_list(items: list[str] | None) -> tuple[str, ...]:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from .agents.registry import DEFAULT_AGENT
-    from .evaluate import EvalOptions, evaluate
-    from .instructions.families import FAMILIES
+    from .api import evaluate
 
-    opts = EvalOptions(
-        out=Path(args.out), suite=args.suite, agents=_split_list(args.agent) or (DEFAULT_AGENT,),
-        families=_split_list(args.family) or FAMILIES, k=args.k, seed=args.seed,
-        routes=_split_list(args.routes) or None, workers=args.workers, backend=args.backend,
-        address=args.address, traffic=args.traffic, quiet=args.quiet, rollout_route=args.rollout_route,
-        agent_timeout=args.agent_timeout or None, batch_inference=args.batch_inference,
-        max_batch=args.max_batch, inference_processes=args.inference_processes,
-    )
     t0 = time.perf_counter()
-    summary = evaluate(opts)
-    ep = summary["episodes"]
-    print(f"{ep['done']} episodes done, {ep['crashed']} crashed, {time.perf_counter() - t0:.0f} s -> "
+    result = evaluate(
+        suite=args.suite, agents=_split_list(args.agent) or None, families=_split_list(args.family) or None,
+        k=args.k, seed=args.seed, out=args.out, workers=args.workers, quiet=args.quiet,
+        routes=_split_list(args.routes) or None, backend=args.backend, address=args.address,
+        traffic=args.traffic, rollout_route=args.rollout_route, agent_timeout=args.agent_timeout or None,
+        batch_inference=args.batch_inference, max_batch=args.max_batch,
+        inference_processes=args.inference_processes,
+    )
+    print(f"{result.done} episodes done, {result.crashed} crashed, {time.perf_counter() - t0:.0f} s -> "
           f"{args.out}", file=sys.stderr)
     return 0
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from .evaluate import report_only
+    from .evaluation import report_only
 
     report_only(Path(args.out), quiet=args.quiet)
     return 0
@@ -167,7 +164,7 @@ def _cmd_check_agent(args: argparse.Namespace) -> int:
 def _cmd_serve_agent(args: argparse.Namespace) -> int:
     from .agents.serve import serve
 
-    serve(args.spec, host=args.host, port=args.port, max_batch=args.max_batch)
+    serve(args.spec, host=args.host, port=args.port, max_batch=args.max_batch, device=args.device)
     return 0
 
 
@@ -249,7 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="tiny (default), short, long, a route XML file or a convert-routes folder")
     v.add_argument("--agent", action="append",
                    help="built-in name, module:Class, path/file.py:Class or remote:http://HOST:PORT "
-                   "(repeatable; default instruction-follower)")
+                   "(repeatable; default bev-token)")
     v.add_argument("--family", action="append",
                    help="paraphrase, ambiguity, noise, misleading (repeatable; default all four)")
     v.add_argument("--k", type=int, default=8, help="variants per family (default 8)")
@@ -308,6 +305,7 @@ def build_parser() -> argparse.ArgumentParser:
     sa.add_argument("--host", default="127.0.0.1",
                     help="address to bind (default 127.0.0.1; 0.0.0.0 exposes the agent to the network)")
     sa.add_argument("--max-batch", type=int, default=8, help="act requests per batch at most (default 8)")
+    sa.add_argument("--device", help="where a learned agent runs: cpu (default), cuda, cuda:N or auto")
     sa.set_defaults(func=_cmd_serve_agent)
 
     c = sub.add_parser(

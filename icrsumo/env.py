@@ -2,8 +2,8 @@
 
 ``import icrsumo.env`` registers the id (or pass ``"icrsumo.env:icrsumo/ICRDrive-v0"`` to
 ``gymnasium.make``, which imports the module itself). One ``step`` is one agent decision
-(0.1 s: the runner's 2 SUMO steps of 0.05 s), the same closed loop as ``icrsumo evaluate``
-(:class:`icrsumo.runner.Episode`): with the same actions, the same episode log.
+(0.1 s: the loop's 2 SUMO steps of 0.05 s), the same closed loop as ``icrsumo evaluate``
+(:class:`icrsumo.sim.Episode`): with the same actions, the same episode log.
 
 Observation (``Dict``): ``bev`` (7, 128, 128) uint8 raster (channels of
 ``icrsumo.render.CHANNELS``, heading up); ``speed`` (1,) float32 m/s; ``instruction`` and
@@ -61,11 +61,12 @@ from .dynamics import Control, VehicleParams
 from .errors import InputError
 from .instructions.store import read_instruction_sets
 from .metrics import PENALTIES, penalised_infractions, score_episode
-from .render import CHANNELS, to_rgb
-from .runner import Episode, RunOptions
+from .render import to_rgb
 from .scenario import Scenario, read_scenario
+from .sim.episode import Episode, RunOptions
 from .termination import is_route_complete
-from .types import InstructionSet, TerminationClass
+from .types import InstructionSet
+from .vocab import Termination, TerminationClass
 
 ENV_ID = "icrsumo/ICRDrive-v0"
 ACTION_TYPES = ("control", "waypoints")
@@ -138,7 +139,7 @@ class ICRDriveEnv(gym.Env):
         else:
             text = spaces.Box(0, 255, (max_text_length,), np.uint8)
         self.observation_space = spaces.Dict({
-            "bev": spaces.Box(0, 255, (len(CHANNELS), bev.height, bev.width), np.uint8),
+            "bev": spaces.Box(0, 255, (len(bev.channels), bev.height, bev.width), np.uint8),
             "speed": spaces.Box(0.0, VehicleParams().max_speed, (1,), np.float32),
             "instruction": text,
             "notice": text,
@@ -187,7 +188,7 @@ class ICRDriveEnv(gym.Env):
     def _rc(self) -> float:
         ep = self._episode
         total = ep.route.total
-        if (ep.done and ep.termination == "completed") or is_route_complete(ep.progress, total):
+        if (ep.done and ep.termination == Termination.COMPLETED) or is_route_complete(ep.progress, total):
             return 100.0
         return min(100.0, max(0.0, 100.0 * ep.progress / total)) if total > 0 else 0.0
 
@@ -223,7 +224,7 @@ class ICRDriveEnv(gym.Env):
             raise RuntimeError(f"the simulation of {self.scenario.route_id} failed at its start: "
                                f"{self._episode.message or self._episode.termination}")
         self._obs = obs
-        self._rc_prev, self._n_inf, self._n_steps = self._rc(), 0, len(self._episode.cols["t"])
+        self._rc_prev, self._n_inf, self._n_steps = self._rc(), 0, self._episode.recorder.steps
         info = {"route_id": self.scenario.route_id, "town": self.scenario.town, "family": iset.family,
                 "k": iset.k, "route_length": self._episode.route.total,
                 "control_dt": self._episode.info.control_dt, "t": obs.t, "instruction_id": obs.instruction_id}
@@ -245,11 +246,11 @@ class ICRDriveEnv(gym.Env):
         rc = self._rc()
         reward = rc - self._rc_prev
         self._rc_prev = rc
-        infractions = penalised_infractions(ep.events)
+        infractions = penalised_infractions(ep.recorder.events)
         for inf in infractions[self._n_inf:]:
             reward -= 100.0 * (1.0 - PENALTIES[inf.kind])
         self._n_inf = len(infractions)
-        cols, n = ep.cols, len(ep.cols["t"])
+        cols, n = ep.recorder.cols, ep.recorder.steps
         d_out = math.fsum(math.hypot(cols["x"][i] - cols["x"][i - 1], cols["y"][i] - cols["y"][i - 1])
                           for i in range(max(self._n_steps, 1), n) if cols["outside"][i] == 1)
         self._n_steps = n

@@ -22,8 +22,8 @@ from typing import Any
 
 from icrsumo.errors import InputError
 from icrsumo.fsio import dumps_json, write_atomic
-from icrsumo.metrics import EVENT_KINDS
 from icrsumo.types import TERMINATIONS, EpisodeLog, EpisodeResult, Event, Infraction, TerminationClass
+from icrsumo.vocab import EventKind, Family, Termination
 
 LOG_VERSION = 1
 
@@ -108,6 +108,14 @@ class _Reader:
             raise self.fail(place, f"expected a string, got {type(v).__name__}")
         return v
 
+    def choice(self, v: Any, enum: type, place: str, what: str):
+        """``v`` as a member of the string enum ``enum`` (InputError naming the values)."""
+        text = self.string(v, place)
+        try:
+            return enum(text)
+        except ValueError:
+            raise self.fail(place, f"unknown {what} {text!r}", f"one of {', '.join(enum)}") from None
+
     def integer(self, v: Any, place: str) -> int:
         if isinstance(v, bool) or not isinstance(v, int):
             raise self.fail(place, f"expected an integer, got {v!r}")
@@ -131,10 +139,7 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
     version = rd.integer(rd.get(d, "version"), "version")
     if version != LOG_VERSION:
         raise rd.fail("version", f"unsupported episode log version {version}", f"expected {LOG_VERSION}")
-    termination = rd.string(rd.get(d, "termination"), "termination")
-    if termination not in TERMINATIONS:
-        raise rd.fail("termination", f"unknown termination {termination!r}",
-                      f"one of {', '.join(TERMINATIONS)}")
+    termination = rd.choice(rd.get(d, "termination"), Termination, "termination", "termination")
     step_length = rd.number(rd.get(d, "step_length"), "step_length")
     if step_length <= 0:
         raise rd.fail("step_length", f"step_length must be > 0, got {step_length}")
@@ -179,10 +184,7 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
     for i, ev in enumerate(raw_events):
         if not isinstance(ev, list) or len(ev) != len(EVENT_FIELDS):
             raise rd.fail(f"events[{i}]", f"expected a list [{', '.join(EVENT_FIELDS)}], got {ev!r}")
-        kind = rd.string(ev[0], f"events[{i}].kind")
-        if kind not in EVENT_KINDS:
-            raise rd.fail(f"events[{i}].kind", f"unknown event kind {kind!r}",
-                          f"one of {', '.join(sorted(EVENT_KINDS))}")
+        kind = rd.choice(ev[0], EventKind, f"events[{i}].kind", "event kind")
         events.append(Event(
             kind=kind,
             t=rd.number(ev[1], f"events[{i}].t"),
@@ -195,7 +197,7 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
     return EpisodeLog(
         route_id=rd.string(rd.get(d, "route_id"), "route_id"),
         agent=rd.string(rd.get(d, "agent"), "agent"),
-        family=rd.string(rd.get(d, "family"), "family"),
+        family=rd.choice(rd.get(d, "family"), Family, "family", "family"),
         k=rd.integer(rd.get(d, "k"), "k"),
         seed=rd.integer(rd.get(d, "seed"), "seed"),
         step_length=step_length,
@@ -271,9 +273,7 @@ def result_from_dict(d: Any, source: str = "<episode result>") -> EpisodeResult:
     rd = _Reader(source)
     if not isinstance(d, dict):
         raise rd.fail("", f"an episode result must be a JSON object, got {type(d).__name__}")
-    termination = rd.string(rd.get(d, "termination"), "termination")
-    if termination not in TERMINATIONS:
-        raise rd.fail("termination", f"unknown termination {termination!r}")
+    termination = rd.choice(rd.get(d, "termination"), Termination, "termination", "termination")
     cls = rd.string(rd.get(d, "termination_class"), "termination_class")
     if cls != TERMINATIONS[termination].value:
         raise rd.fail("termination_class", f"{cls!r} does not match termination {termination!r}")
@@ -285,7 +285,7 @@ def result_from_dict(d: Any, source: str = "<episode result>") -> EpisodeResult:
         if not isinstance(it, list) or len(it) != 5:
             raise rd.fail(f"infractions[{i}]", f"expected [kind, factor, t, pos, other], got {it!r}")
         infractions.append(Infraction(
-            kind=rd.string(it[0], f"infractions[{i}].kind"),
+            kind=rd.choice(it[0], EventKind, f"infractions[{i}].kind", "event kind"),
             factor=rd.number(it[1], f"infractions[{i}].factor"),
             t=rd.number(it[2], f"infractions[{i}].t"),
             pos=rd.number(it[3], f"infractions[{i}].pos"),
@@ -294,7 +294,7 @@ def result_from_dict(d: Any, source: str = "<episode result>") -> EpisodeResult:
     return EpisodeResult(
         route_id=rd.string(rd.get(d, "route_id"), "route_id"),
         agent=rd.string(rd.get(d, "agent"), "agent"),
-        family=rd.string(rd.get(d, "family"), "family"),
+        family=rd.choice(rd.get(d, "family"), Family, "family", "family"),
         k=rd.integer(rd.get(d, "k"), "k"),
         rc=rd.number(rd.get(d, "rc"), "rc"),
         is_=rd.number(rd.get(d, "is"), "is"),

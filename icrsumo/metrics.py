@@ -12,28 +12,28 @@ import math
 
 from icrsumo.termination import EPS, is_route_complete
 from icrsumo.types import TERMINATIONS, EpisodeLog, EpisodeResult, Event, Infraction
+from icrsumo.vocab import EventKind, Termination
 
-PENALTIES: dict[str, float] = {
-    "collision_pedestrian": 0.50,
-    "collision_vehicle": 0.60,
-    "collision_static": 0.65,
-    "red_light": 0.70,
-    "stop_sign": 0.80,
+#: IS factor of each penalised event kind (Leaderboard 1.0)
+PENALTIES: dict[EventKind, float] = {
+    EventKind.COLLISION_PEDESTRIAN: 0.50,
+    EventKind.COLLISION_VEHICLE: 0.60,
+    EventKind.COLLISION_STATIC: 0.65,
+    EventKind.RED_LIGHT: 0.70,
+    EventKind.STOP_SIGN: 0.80,
 }
 
 #: Event kinds that are recorded but never penalised.
-NON_PENALISED: tuple[str, ...] = (
-    "wrong_way", "lane_invasion", "teleport_background", "ego_teleport", "sim_error",
-)
+NON_PENALISED: tuple[EventKind, ...] = tuple(k for k in EventKind if k not in PENALTIES)
 
 #: Every event kind an :class:`~icrsumo.types.EpisodeLog` may hold.
-EVENT_KINDS: frozenset[str] = frozenset(PENALTIES) | frozenset(NON_PENALISED)
+EVENT_KINDS: frozenset[EventKind] = frozenset(EventKind)
 
 #: Collision events of one kind less than this many seconds apart are one collision when the
 #: actor is unknown (static layout, or a vehicle/pedestrian event without ``other``).
 COLLISION_RUN_GAP_S = 5.0
 
-_ACTOR_COLLISIONS = ("collision_vehicle", "collision_pedestrian")
+_ACTOR_COLLISIONS = (EventKind.COLLISION_VEHICLE, EventKind.COLLISION_PEDESTRIAN)
 
 
 def route_completion(log: EpisodeLog) -> float:
@@ -42,7 +42,7 @@ def route_completion(log: EpisodeLog) -> float:
     if not log.progress:
         return 0.0
     best = max(log.progress)
-    if log.termination == "completed" or is_route_complete(best, log.route_length):
+    if log.termination == Termination.COMPLETED or is_route_complete(best, log.route_length):
         return 100.0
     if log.route_length <= 0:  # unreachable: a route of length <= 10 m is always complete
         return 0.0
@@ -74,7 +74,7 @@ def penalised_infractions(events: tuple[Event, ...] | list[Event]) -> tuple[Infr
     collision_vehicle / collision_pedestrian: once per ``other`` actor id per episode (SUMO
     repeats a contact on every step of overlap). collision_static, and actor collisions with
     an empty ``other``: once per run of events less than 5 s apart. red_light and stop_sign:
-    every event (the runner emits one per junction entry). Unknown kinds raise ValueError.
+    every event (the sensors emit one per junction entry). Unknown kinds raise ValueError.
     """
     seen_actors: set[tuple[str, str]] = set()
     last_anon: dict[str, float] = {}
@@ -89,12 +89,13 @@ def penalised_infractions(events: tuple[Event, ...] | list[Event]) -> tuple[Infr
             if key in seen_actors:
                 continue
             seen_actors.add(key)
-        elif e.kind in _ACTOR_COLLISIONS or e.kind == "collision_static":
+        elif e.kind in _ACTOR_COLLISIONS or e.kind == EventKind.COLLISION_STATIC:
             prev = last_anon.get(e.kind)
             last_anon[e.kind] = e.t
             if prev is not None and e.t - prev < COLLISION_RUN_GAP_S - EPS:
                 continue
-        out.append(Infraction(kind=e.kind, factor=PENALTIES[e.kind], t=e.t, pos=e.pos, other=e.other))
+        out.append(Infraction(kind=EventKind(e.kind), factor=PENALTIES[e.kind], t=e.t, pos=e.pos,
+                              other=e.other))
     return tuple(out)
 
 
@@ -119,7 +120,7 @@ def score_episode(log: EpisodeLog) -> EpisodeResult:
         rc=round(rc, 4) + 0.0,
         is_=round(is_, 6) + 0.0,
         ds=round(rc * is_, 4) + 0.0,
-        termination=log.termination,
+        termination=Termination(log.termination),
         termination_class=TERMINATIONS[log.termination],
         infractions=infractions,
         outside_lanes_pct=round(pct, 4) + 0.0,

@@ -71,18 +71,25 @@ class BevSpec:
     ``m_per_px``: resolution (m per pixel); ``height`` x ``width``: raster size (px);
     ``behind_m``: view behind the ego centre (m). The view ahead is
     ``height * m_per_px - behind_m`` (48 m by default), ``width * m_per_px / 2`` to each side.
+    ``channels``: the raster's channels, a subset of :data:`CHANNELS` in any order (default
+    all, in :data:`CHANNELS` order).
     """
 
     m_per_px: float = 0.5
     height: int = 128
     width: int = 128
     behind_m: float = 16.0
+    channels: tuple[str, ...] = CHANNELS
 
     def __post_init__(self) -> None:
         if not (self.m_per_px > 0 and math.isfinite(self.m_per_px)):
             raise ValueError(f"BevSpec.m_per_px must be a positive number, got {self.m_per_px}")
         if self.height < 2 or self.width < 2:
             raise ValueError(f"BevSpec size must be at least 2x2 px, got {self.height}x{self.width}")
+        bad = [c for c in self.channels if c not in CHANNELS]
+        if bad or not self.channels or len(set(self.channels)) != len(self.channels):
+            raise ValueError(f"BevSpec.channels must be distinct names among {', '.join(CHANNELS)}, "
+                             f"got {self.channels!r}")
         if not 0.0 <= self.behind_m <= self.height * self.m_per_px:
             raise ValueError(
                 f"BevSpec.behind_m={self.behind_m} must lie in [0, height * m_per_px = "
@@ -163,9 +170,10 @@ class BevRenderer:
         #: stop-line thickness (px)
         self._stop_px = max(1, int(round(STOP_LINE_M / mpp)))
         self._draw_static()
-        #: the drivable layer as bytes, row-major, for per-point lookups (drivable_xy)
-        self._drivable = self.canvas[..., 0].tobytes()
         self._build_tls()
+        #: output channel order as indices into CHANNELS (None: all, in order)
+        self._select = None if tuple(spec.channels) == CHANNELS else \
+            np.array([CHANNELS.index(c) for c in spec.channels])
         self._tl_cache: dict[tuple[int, str], np.ndarray] = {}
         self._tl_draw_cache: dict[tuple, tuple[np.ndarray, tuple]] = {}
         self._ego_cache: dict[tuple[float, float], np.ndarray] = {}
@@ -192,35 +200,6 @@ class BevRenderer:
         out = np.zeros(len(cr), dtype=bool)
         out[inside] = self.canvas[cr[inside, 1], cr[inside, 0], 0] > 0
         return out
-
-    def drivable_xy(self, x: float, y: float) -> bool:
-        """:meth:`drivable_at` of one point (x, y) m, same rounding, without arrays (the runner
-        asks this for the ego's four corners every simulation step)."""
-        mpp = self.spec.m_per_px
-        try:
-            col = round((x - self.x0) / mpp)
-            row = round((self.y1 - y) / mpp)
-        except (ValueError, OverflowError):  # NaN / inf: outside the canvas
-            return False
-        h, w = self.canvas.shape[:2]
-        return 0 <= col < w and 0 <= row < h and self._drivable[row * w + col] != 0
-
-    def count_off(self, points) -> int:
-        """How many of ``points`` (an iterable of (x, y) m) are off the drivable area:
-        :meth:`drivable_xy` of each, in one call."""
-        mpp, x0, y1, lane = self.spec.m_per_px, self.x0, self.y1, self._drivable
-        h, w = self.canvas.shape[:2]
-        n = 0
-        for x, y in points:
-            try:
-                col = round((x - x0) / mpp)
-                row = round((y1 - y) / mpp)
-            except (ValueError, OverflowError):
-                n += 1
-                continue
-            if not (0 <= col < w and 0 <= row < h and lane[row * w + col] != 0):
-                n += 1
-        return n
 
     def _stop_line(self, lane_id: str) -> tuple[np.ndarray, np.ndarray]:
         """Stop line of a lane: (left end, right end) in world m, perpendicular to the lane's last
@@ -408,7 +387,7 @@ class BevRenderer:
         character per link index: r/R/y/Y/s -> 'stop', g/G -> 'go', others (o/O/u/...) nothing;
         a tls missing from the dict draws nothing. Empty arrays (or ``None``) draw nothing.
 
-        Returns a new ``(len(CHANNELS), height, width)`` uint8 array of 0/255 (see
+        Returns a new ``(len(spec.channels), height, width)`` uint8 array of 0/255 (see
         :data:`CHANNELS`).
         """
         sp = self.spec
@@ -485,7 +464,7 @@ class BevRenderer:
                 for mask, ch in zip(masks, (_STOP, _GO)):
                     if mask is not None:
                         cv2.polylines(out[ch], pts[mask], False, 255, self._stop_px, cv2.LINE_8, _SHIFT)
-        return out
+        return out if self._select is None else out[self._select]
 
 
 # ---------------------------------------------------------------------- visualisation

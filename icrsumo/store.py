@@ -13,7 +13,9 @@ import zlib
 from dataclasses import asdict, fields
 from pathlib import Path
 
+from .errors import InputError
 from .types import EpisodeRecord
+from .vocab import EpisodeStatus, EventKind, Family, Termination, TerminationClass
 
 _COLUMNS = [f.name for f in fields(EpisodeRecord)]
 _SCHEMA = """
@@ -82,7 +84,17 @@ class ResultStore:
         out = []
         for r in rows:
             d = dict(zip(_COLUMNS, r))
-            d["infractions"] = tuple((str(k), float(f)) for k, f in json.loads(d["infractions"] or "[]"))
+            try:
+                raw = json.loads(d["infractions"] or "[]")
+                d["infractions"] = tuple((EventKind(k), float(f)) for k, f in raw)
+                d["status"], d["family"] = EpisodeStatus(d["status"]), Family(d["family"])
+                term, cls = d["termination"], d["termination_class"]
+                d["termination"] = Termination(term) if term else ""
+                d["termination_class"] = TerminationClass(cls) if cls else ""
+            except ValueError as err:
+                key = "/".join(str(d[k]) for k in ("agent", "route_id", "family", "k", "seed"))
+                raise InputError(self.path, f"episode {key}", f"holds an unknown value ({err})",
+                                 "the store is damaged: move it away and rerun the evaluation") from None
             out.append(EpisodeRecord(**d))
         return out
 

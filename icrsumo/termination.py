@@ -1,8 +1,9 @@
 """Run-ending rules of Leaderboard 1.0 as a pure, incremental monitor.
 
-The runner calls :meth:`TerminationMonitor.update` once per simulation step; :func:`replay`
-runs the same monitor over a recorded :class:`~icrsumo.types.EpisodeLog`, so a log can be
-checked against the rules that ended it. No SUMO here.
+The closed loop (:mod:`icrsumo.sim.episode`) calls :meth:`TerminationMonitor.update` once per
+simulation step; :func:`replay` runs the same monitor over a recorded
+:class:`~icrsumo.types.EpisodeLog`, so a log can be checked against the rules that ended it.
+No SUMO here.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import math
 from collections.abc import Sequence
 
 from icrsumo.types import EpisodeLog, Event
+from icrsumo.vocab import EventKind, Termination
 
 DEVIATION_M = 30.0
 BLOCKED_SPEED = 0.1
@@ -24,7 +26,8 @@ COMPLETION_RADIUS_M = 10.0
 EPS = 1e-6
 
 #: events that end a run by themselves -> termination kind (checked in this order)
-ENDING_EVENTS: dict[str, str] = {"sim_error": "sim_error", "ego_teleport": "stuck"}
+ENDING_EVENTS: dict[EventKind, Termination] = {EventKind.SIM_ERROR: Termination.SIM_ERROR,
+                                               EventKind.EGO_TELEPORT: Termination.STUCK}
 
 
 def route_timeout(route_length: float) -> float:
@@ -56,7 +59,7 @@ class TerminationMonitor:
         self.start_t = float(start_t)
         self.timeout = route_timeout(self.route_length)
         self.slow_since: float | None = None
-        self.result: tuple[str, float] | None = None
+        self.result: tuple[Termination, float] | None = None
         self._last_t: float | None = None
 
     def blocked_for(self, t: float) -> float:
@@ -64,7 +67,7 @@ class TerminationMonitor:
         return 0.0 if self.slow_since is None else t - self.slow_since
 
     def update(self, t: float, progress: float, route_dist: float, speed: float,
-               events: Sequence[Event] = ()) -> str | None:
+               events: Sequence[Event] = ()) -> Termination | None:
         """Termination kind at this step or None.
 
         Order of checks: a sim_error event, an ego_teleport event ('stuck'), completed
@@ -87,20 +90,21 @@ class TerminationMonitor:
             self.result = (kind, t)
         return kind
 
-    def _check(self, t: float, progress: float, route_dist: float, events: Sequence[Event]) -> str | None:
+    def _check(self, t: float, progress: float, route_dist: float,
+               events: Sequence[Event]) -> Termination | None:
         if events:
             kinds = {e.kind for e in events}
             for event_kind, kind in ENDING_EVENTS.items():
                 if event_kind in kinds:
                     return kind
         if is_route_complete(progress, self.route_length):
-            return "completed"
+            return Termination.COMPLETED
         if route_dist > DEVIATION_M + EPS:
-            return "route_deviation"
+            return Termination.ROUTE_DEVIATION
         if self.slow_since is not None and t - self.slow_since >= BLOCKED_S - EPS:
-            return "agent_blocked"
+            return Termination.AGENT_BLOCKED
         if t - self.start_t > self.timeout + EPS:
-            return "route_timeout"
+            return Termination.ROUTE_TIMEOUT
         return None
 
 
@@ -108,7 +112,7 @@ def events_by_step(log: EpisodeLog) -> tuple[list[list[Event]], list[Event]]:
     """The log's events attached to its steps, and the events after the last step.
 
     Each event goes to the step whose ``t`` is nearest (the earlier one on a tie) when that is
-    within half a step. Events more than half a step after the last step (the runner records
+    within half a step. Events more than half a step after the last step (the loop records
     ``ego_teleport`` / ``sim_error`` at a time for which it logged no step) are returned as the
     trailing list; events more than half a step before the first step are dropped.
     """
@@ -128,7 +132,7 @@ def events_by_step(log: EpisodeLog) -> tuple[list[list[Event]], list[Event]]:
     return out, trailing
 
 
-def replay(log: EpisodeLog) -> tuple[str, float] | None:
+def replay(log: EpisodeLog) -> tuple[Termination, float] | None:
     """Run the monitor over the log's columns (events attached to the step with the same t,
     within half a step) and return the first ``(kind, t)``, or None if no rule fired.
 

@@ -3,7 +3,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import Enum
+
+from .vocab import (
+    TERMINATION_CLASS,
+    EpisodeStatus,
+    EventKind,
+    Family,
+    Intent,
+    Termination,
+    TerminationClass,
+)
 
 
 @dataclass(frozen=True)
@@ -113,19 +122,6 @@ class EgoRoute:
     lane_changes: tuple[LaneChange, ...]
 
 
-class Intent(str, Enum):
-    """What an instruction asks the driver to do next."""
-
-    LEFT = "left"
-    RIGHT = "right"
-    STRAIGHT = "straight"
-    FOLLOW = "follow"
-    LANE_LEFT = "lane_left"
-    LANE_RIGHT = "lane_right"
-    STOP = "stop"
-    UNKNOWN = "unknown"
-
-
 @dataclass(frozen=True)
 class Maneuver:
     """One thing the route asks of the driver, at route position ``pos`` (m).
@@ -194,45 +190,28 @@ class InstructionSet:
     or counterfactual variant ``k`` of a family, with the baseline's ids and triggers."""
 
     route_id: str
-    family: str
+    family: Family
     k: int
     seed: int
     instructions: tuple[Instruction, ...]
     notices: tuple[Notice, ...] = ()
 
 
-class TerminationClass(str, Enum):
-    """ICR-Drive's failure classes: done, route deviation (RD) or timeout-like (TO)."""
-
-    DONE = "done"
-    RD = "RD"
-    TO = "TO"
-
-
-#: termination kind -> class. completed: the route's end was reached; route_deviation: more
-#: than 30 m from the route; agent_blocked: under 0.1 m/s for 180 s; route_timeout: 0.8 s per
-#: metre + 5 s elapsed; stuck: SUMO teleported the ego; sim_error: the simulator failed.
-TERMINATIONS: dict[str, TerminationClass] = {
-    "completed": TerminationClass.DONE,
-    "route_deviation": TerminationClass.RD,
-    "agent_blocked": TerminationClass.TO,
-    "route_timeout": TerminationClass.TO,
-    "stuck": TerminationClass.TO,
-    "sim_error": TerminationClass.TO,
-}
+#: termination kind -> class (see :class:`icrsumo.vocab.Termination`)
+TERMINATIONS: dict[Termination, TerminationClass] = TERMINATION_CLASS
 
 
 @dataclass(frozen=True)
 class Event:
     """Something that happened at simulation time ``t`` (s) and route position ``pos`` (m).
 
-    ``kind``: collision_vehicle, collision_pedestrian, collision_static, red_light, stop_sign,
-    wrong_way, lane_invasion, teleport_background (a background vehicle teleported: a jam),
-    ego_teleport (SUMO removed the ego: stuck), sim_error.
+    ``kind``: an :class:`EventKind` (collisions, red light, stop sign, wrong way, lane
+    invasion, teleport_background: a background vehicle teleported (a jam), ego_teleport: SUMO
+    removed the ego (stuck), sim_error).
     ``other``: the other actor or the junction / lane id; ``x``, ``y`` in m.
     """
 
-    kind: str
+    kind: EventKind
     t: float
     pos: float
     other: str = ""
@@ -250,13 +229,13 @@ class EpisodeLog:
     instruction id, -1 none), ``outside`` (1 when the ego's footprint is outside the route's
     lanes this step: off the route's lanes, off-road or wrong way, else 0), ``route_dist`` (m,
     distance from the ego centre to the route polyline). ``route_length`` in m.
-    ``termination`` is a key of :data:`TERMINATIONS`; ``t`` strictly increases, ``progress``
+    ``termination`` is a :class:`Termination`; ``t`` strictly increases, ``progress``
     never decreases, and the route timeout runs from ``t[0]``.
     """
 
     route_id: str
     agent: str
-    family: str
+    family: Family
     k: int
     seed: int
     step_length: float
@@ -271,7 +250,7 @@ class EpisodeLog:
     outside: tuple[int, ...]
     route_dist: tuple[float, ...]
     events: tuple[Event, ...]
-    termination: str
+    termination: Termination
     termination_t: float
     message: str = ""
 
@@ -280,7 +259,7 @@ class EpisodeLog:
 class Infraction:
     """A penalised infraction: its kind, the IS factor it applies (e.g. 0.6), when and where."""
 
-    kind: str
+    kind: EventKind
     factor: float
     t: float
     pos: float
@@ -293,12 +272,12 @@ class EpisodeResult:
 
     route_id: str
     agent: str
-    family: str
+    family: Family
     k: int
     rc: float
     is_: float
     ds: float
-    termination: str
+    termination: Termination
     termination_class: TerminationClass
     infractions: tuple[Infraction, ...]
     outside_lanes_pct: float
@@ -317,15 +296,15 @@ class EpisodeRecord:
 
     agent: str
     route_id: str
-    family: str
+    family: Family
     k: int
     seed: int
-    status: str
+    status: EpisodeStatus
     ds: float = 0.0
     rc: float = 0.0
     is_: float = 0.0
-    termination: str = ""
-    termination_class: str = ""
+    termination: Termination | str = ""
+    termination_class: TerminationClass | str = ""
     infractions: tuple[tuple[str, float], ...] = ()
     length: float = 0.0
     duration: float = 0.0

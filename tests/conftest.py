@@ -2,11 +2,24 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 
 DATA = Path(__file__).parent / "data"
+
+#: session fixtures that run SUMO's tools: a test using one is a SUMO test
+_SUMO_FIXTURES = frozenset({"carla_mini_out", "converted", "generated"})
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Mark tests that use a SUMO fixture with ``sumo`` and run the SUMO-free tests first
+    (stable order otherwise): ``pytest -m "not sumo"`` runs the fast unit tests alone."""
+    for item in items:
+        if _SUMO_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.sumo)
+    items.sort(key=lambda item: item.get_closest_marker("sumo") is not None)
 
 
 @pytest.fixture(scope="session")
@@ -54,3 +67,26 @@ def generated(converted, tmp_path_factory) -> dict[str, Path]:
         assert failures == []
         out[split] = o
     return out
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    """``$ICRSUMO_CACHE`` in the session's temporary folder (one cache for every module that
+    uses the bundled route tiny_003), set for the module."""
+    path = tmp_path_factory.getbasetemp() / "icrsumo_cache"
+    old = os.environ.get("ICRSUMO_CACHE")
+    os.environ["ICRSUMO_CACHE"] = str(path)
+    yield path
+    if old is None:
+        os.environ.pop("ICRSUMO_CACHE", None)
+    else:
+        os.environ["ICRSUMO_CACHE"] = old
+
+
+@pytest.fixture(scope="module")
+def suite(cache) -> Path:
+    """A convert-routes folder holding tiny_003 (the cached bundled route; converts it once)."""
+    from icrsumo.cache import bundled_route
+
+    sc_dir, _ = bundled_route("tiny_003")
+    return sc_dir.parents[1]

@@ -18,6 +18,8 @@ from icrsumo.resources import bundled_suites, bundled_towns
 from icrsumo.routes import read_routes
 from icrsumo.scenario import find_scenarios, read_scenario
 
+pytestmark = pytest.mark.sumo
+
 ROOT = Path(__file__).resolve().parent.parent
 EVAL_SPLITS = ("tiny", "short", "long")
 

@@ -14,6 +14,8 @@ from icrsumo.convert import ConvertOptions, convert_routes, route_seed, safe_nam
 from icrsumo.errors import InputError
 from icrsumo.scenario import find_scenarios, read_scenario
 
+pytestmark = pytest.mark.sumo
+
 
 def _tree_bytes(root: Path) -> dict[str, bytes]:
     return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}

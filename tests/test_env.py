@@ -22,22 +22,11 @@ from icrsumo.agents.base import Action, AgentError  # noqa: E402
 from icrsumo.dynamics import Control  # noqa: E402
 from icrsumo.logs import dumps_log  # noqa: E402
 from icrsumo.metrics import route_completion, score_episode  # noqa: E402
-from icrsumo.runner import run_episode  # noqa: E402
+from icrsumo.sim.episode import run_episode  # noqa: E402
+
+pytestmark = pytest.mark.sumo
 
 README = Path(__file__).resolve().parents[1] / "README.md"
-
-
-@pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    """One cache folder for the session (shared with test_user_agents.py), set for this module."""
-    path = tmp_path_factory.getbasetemp() / "icrsumo_cache"
-    old = os.environ.get("ICRSUMO_CACHE")
-    os.environ["ICRSUMO_CACHE"] = str(path)
-    yield path
-    if old is None:
-        os.environ.pop("ICRSUMO_CACHE", None)
-    else:
-        os.environ["ICRSUMO_CACHE"] = old
 
 
 def _policy(obs) -> np.ndarray:

@@ -9,8 +9,9 @@ episode, and the agent is queried at 10 Hz. Modes (``--modes``, comma-separated)
 
 * ``inprocess-cpu``: ``icrsumo evaluate --agent AGENT --workers N``: each worker process runs
   the network on its own core with one torch thread (the default; bitwise repeatable);
-* ``inprocess-cuda``: the same with ``ICRSUMO_AGENT_DEVICE=cuda``: every worker process holds
-  its own CUDA context and runs batch-1 forward passes on the shared GPU;
+* ``inprocess-cuda``: the same with the learned agent built on ``--device`` (evaluate's
+  ``agent_device`` option): every worker process holds its own CUDA context and runs batch-1
+  forward passes on the shared GPU;
 * ``batched``: ``icrsumo serve-agent AGENT --max-batch B`` on the GPU (127.0.0.1) and
   ``icrsumo evaluate --agent remote:URL --workers N``: the workers' concurrent ``/act``
   requests are gathered into one forward pass (``act_batch``);
@@ -70,9 +71,7 @@ def prepare(suite_dir: Path, work: Path, families: tuple[str, ...], k: int) -> P
 
 def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log) -> tuple[dict, dict]:
     """One ICR run of ``mode``: (measurements, {episode key: (ds, rc, termination)})."""
-    from icrsumo.agents.batched import LAST_STATS
-    from icrsumo.evaluate import EvalOptions, evaluate
-    from icrsumo.learn.agent import DEVICE_ENV
+    from icrsumo.evaluation import EvalOptions, run_evaluation
     from icrsumo.store import ResultStore
 
     shutil.copytree(prep, run_dir)
@@ -81,33 +80,28 @@ def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log
     workers = int(n) if n else args.workers
     served = mode in ("batched", "unbatched")
     proc, spec = None, args.agent
-    old_env = os.environ.get(DEVICE_ENV)
     if served:
         cfg = {"agent": args.agent, "device": args.device}
         proc, url = _start_server(cfg, args.batch if mode == "batched" else 1, log)
         spec = f"remote:{url}"
-    elif not mode.startswith("ipc"):
-        os.environ[DEVICE_ENV] = "cpu" if mode == "inprocess-cpu" else args.device
     try:
         opts = EvalOptions(out=run_dir, agents=(spec,), families=tuple(args.families), k=args.k,
                            workers=workers, quiet=True,
                            max_batch=1 if mode == "ipc-unbatched" else args.batch,
                            batch_inference=args.device if mode.startswith("ipc") else None,
                            inference_processes=int(procs) if procs else 1,
+                           agent_device=args.device if mode == "inprocess-cuda" else None,
                            routes=tuple(args.routes.split(",")) if args.routes else None)
         s0 = _get_info(url)["stats"] if served else {"acts": 0, "batches": 0}
         t1 = time.perf_counter()
-        summary = evaluate(opts)
+        result = run_evaluation(opts)
+        summary = result.summary
         t2 = time.perf_counter()
         # the server's counters (HTTP), or those of evaluate's inference processes (ipc)
-        s1 = _get_info(url)["stats"] if served else LAST_STATS.pop(args.agent, None)
-        evaluate(opts)  # all stored: reuse checks, generation, reports
+        s1 = _get_info(url)["stats"] if served else next(iter(result.inference.values()), None)
+        run_evaluation(opts)  # all stored: reuse checks, generation, reports
         t3 = time.perf_counter()
     finally:
-        if old_env is None:
-            os.environ.pop(DEVICE_ENV, None)
-        else:
-            os.environ[DEVICE_ENV] = old_env
         if proc is not None:
             _stop_server(proc)
     with ResultStore(run_dir / "results.sqlite") as store:

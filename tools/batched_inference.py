@@ -11,8 +11,8 @@ reflect a closed loop whose simulator side costs a fixed time per act.
 
 Modes (``--modes``, comma-separated):
 
-* ``batched``: ``icrsumo serve-agent AGENT --max-batch B`` (``ICRSUMO_AGENT_DEVICE`` =
-  ``--device``) on 127.0.0.1; N client processes, each its own session (``RemoteAgent``);
+* ``batched``: ``icrsumo serve-agent AGENT --max-batch B --device DEVICE`` on 127.0.0.1; N
+  client processes, each its own session (``RemoteAgent``);
   the server gathers concurrent ``/act`` requests into batches (the agent's ``act_batch``);
 * ``unbatched``: the same with ``--max-batch 1``;
 * ``inprocess-cpu``: no server; N processes each running ``LearnedAgent.act`` on CPU with one
@@ -131,7 +131,6 @@ def _worker(idx: int, cfg: dict, ready, go, start, out) -> None:
     """One replayed episode: reset an agent (remote or in-process), warm up, then act in a
     closed loop with ``sim_ms`` of simulated work per act until the common deadline."""
     try:
-        os.environ["ICRSUMO_AGENT_DEVICE"] = cfg["device"]
         from icrsumo.agents.base import EpisodeInfo
 
         info = EpisodeInfo(route_id=f"replay_{idx}", town="replay", net="", step_length=0.05,
@@ -143,7 +142,7 @@ def _worker(idx: int, cfg: dict, ready, go, start, out) -> None:
         else:
             from icrsumo.agents.registry import agent_factory
 
-            agent = agent_factory(cfg["agent"])()
+            agent = agent_factory(cfg["agent"], cfg["device"])()
         agent.reset(info)
         obs = observations(load_episode(cfg["files"], idx, cfg["max_frames"]))
         for _ in range(cfg["warmup"]):
@@ -187,10 +186,10 @@ def _start_server(cfg: dict, max_batch: int, log) -> tuple[subprocess.Popen, str
     from icrsumo.agents.remote import free_port
 
     port = free_port()
-    env = dict(os.environ, ICRSUMO_AGENT_DEVICE=cfg["device"],
+    env = dict(os.environ,
                PYTHONPATH=os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p))
     cmd = [sys.executable, "-m", "icrsumo", "serve-agent", cfg["agent"], "--port", str(port),
-           "--max-batch", str(max_batch)]
+           "--max-batch", str(max_batch), "--device", cfg["device"]]
     proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=log)
     url = f"http://127.0.0.1:{port}"
     t_end = time.monotonic() + 120

@@ -22,7 +22,7 @@ with normal traffic, 12 traffic lights; converted exactly as ``icrsumo convert-r
 * **SUMO, ego moved** -- the SUMO-side floor of any closed loop: the same scenario with the ego
   under remote control, moved along the route-oracle's recorded trajectory by
   ``vehicle.moveToXY(keepRoute=2)`` every step, with the subscriptions the runner uses.
-* **runner only** -- the closed loop (``icrsumo.runner.run_episode``) with a non-privileged agent
+* **runner only** -- the closed loop (``icrsumo.sim.run_episode``) with a non-privileged agent
   whose ``act`` costs nothing: it replays the route-oracle's recorded actions, so the episode is
   the route-oracle's, byte for byte (checked), but no World view is built and no planning runs.
   This is the runner's own overhead for a learned agent: sensors, infractions, termination,
@@ -31,7 +31,7 @@ with normal traffic, 12 traffic lights; converted exactly as ``icrsumo convert-r
   ``icrsumo.agents.registry.BUILTIN``, learned agents included as they are added): the closed
   loop per step (the loop only: SUMO start and warm-up excluded), its ratio to bare SUMO (per
   repeat, then the median), the BEV render time per frame and the agent's ``act`` time per call
-  (both timed inside the loop through ``RunOptions(timings=...)``), and simulated seconds per
+  (both timed inside the loop by a ``LoopTimer`` callback), and simulated seconds per
   wall second per core, for the loop and for whole episodes (SUMO start and the 20 s traffic
   warm-up included).
 * **instruction generation**: baseline sequence + 4 families x K = 8 variants (32 variant
@@ -93,9 +93,10 @@ from icrsumo.instructions.maneuvers import extract_maneuvers, is_highway  # noqa
 from icrsumo.instructions.store import read_instruction_sets, route_document  # noqa: E402
 from icrsumo.networks import load_net  # noqa: E402
 from icrsumo.resources import bundled_suites  # noqa: E402
-from icrsumo.runner import CONTEXT_RADIUS, LoopTimings, RunOptions, run_episode  # noqa: E402
 from icrsumo.scenario import find_scenarios, read_scenario  # noqa: E402
-from icrsumo.sim import EGO_ID, SumoSession, sumo_constants  # noqa: E402
+from icrsumo.sim.backend import CONTEXT_RADIUS, EGO_ID, SumoSession, sumo_constants  # noqa: E402
+from icrsumo.sim.callbacks import LoopTimer, LoopTimings  # noqa: E402
+from icrsumo.sim.episode import RunOptions, run_episode  # noqa: E402
 
 #: CARLA reference point (issue 7): one LangAuto route with LMDrive on an RTX 3090
 CARLA_LMDRIVE_RT = 0.076
@@ -258,7 +259,7 @@ def closed_loop(sc, baseline, agents: list[str], repeats: int, log=print) -> dic
                 agent = ReplayAgent(rec.actions) if name == RUNNER_ONLY else make_agent(name)
                 _set_threads(1)
                 tm = LoopTimings()
-                ep = run_episode(sc, baseline, agent, RunOptions(timings=tm))
+                ep = run_episode(sc, baseline, agent, callbacks=[LoopTimer(tm)])
             except Exception as err:  # a learned agent without weights, say: report, go on
                 errors[name] = f"{type(err).__name__}: {err}"
                 log(f"benchmark: agent {name} skipped: {errors[name]}")
@@ -352,7 +353,7 @@ def instruction_generation(scenario_dirs: list[Path], n_routes: int, repeats: in
 def icr_runs(converted: Path, work: Path, configs: list[tuple[str, str, int]], repeats: int,
              routes: tuple[str, ...] | None, k: int, log=print) -> dict:
     """The default ICR run per (label, backend, workers), episodes timed without the rest."""
-    from icrsumo.evaluate import EvalOptions, evaluate
+    from icrsumo.evaluation import EvalOptions, run_evaluation
     from icrsumo.store import ResultStore
 
     prep = work / "prep"
@@ -378,10 +379,10 @@ def icr_runs(converted: Path, work: Path, configs: list[tuple[str, str, int]], r
                                routes=routes)
             c1 = _cpu_s()
             t1 = time.perf_counter()
-            summary = evaluate(opts)
+            summary = run_evaluation(opts).summary
             t2 = time.perf_counter()
             cpu.append(_cpu_s() - c1)
-            evaluate(opts)  # everything stored: conversion reuse, generation, reports only
+            run_evaluation(opts)  # everything stored: conversion reuse, generation, reports only
             t3 = time.perf_counter()
             n = summary["episodes"]["done"] + summary["episodes"]["crashed"]
             with ResultStore(run_dir / "results.sqlite") as store:

@@ -4,7 +4,8 @@ An agent is reset with an :class:`EpisodeInfo` (never the route) and acts on an
 :class:`Observation` every control step (``control_dt`` s, 10 Hz by default), returning an
 :class:`Action`: low-level controls, or future waypoints in the ego frame that the built-in
 controller tracks. Privileged agents (``privileged = True``: route-oracle,
-instruction-follower) also receive a :class:`World` view of the simulator state.
+instruction-follower) also receive a :class:`World` view of the simulator state; its route
+only when they also declare ``needs_route = True`` (the route-oracle alone).
 """
 
 from __future__ import annotations
@@ -44,7 +45,8 @@ class World:
     ``vehicles``: (N, 5) other vehicles near the ego: centre x, y (m), yaw (rad), length,
     width (m); ``pedestrians``: (M, 2) centres (m); ``lane``/``lane_pos``: SUMO's lane of the
     ego ("" when off the road) and position on it (m); ``tl_states``: tls id -> state string;
-    ``route``: the scenario's route (only the route-oracle may use it).
+    ``route``: the scenario's route, only for agents that declare ``needs_route = True``
+    (the route-oracle), else None.
     """
 
     net: RoadNet
@@ -107,7 +109,10 @@ def batch_hook(cls: object) -> Callable[[list, list[Observation]], list[Action]]
     * ``def act_batch(self, observations) -> list[Action]``: called on the first agent of the
       batch, for agents whose ``act`` depends only on the observation and shared weights.
 
-    Either must return what each agent's ``act`` would return for its observation."""
+    Either must return what each agent's ``act`` would return for its observation. A factory
+    that is not a class but makes instances of one names it as ``agent_class`` (e.g.
+    :class:`icrsumo.agents.registry.OnDevice`)."""
+    cls = getattr(cls, "agent_class", cls)
     if not isinstance(cls, type):
         return None
     raw = inspect.getattr_static(cls, "act_batch", None)

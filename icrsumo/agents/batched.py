@@ -2,21 +2,22 @@
 workers send their observations to one inference process that runs the agent's network for
 all of them in one forward pass.
 
-:func:`start_server` starts the inference process (``spawn``; ``ICRSUMO_AGENT_DEVICE`` =
-``device`` in it) for one agent spec. It listens on a Unix socket in a private folder (mode
-0700) and accepts only clients that know its random key (``multiprocessing.connection``'s
-HMAC handshake; the key reaches the forked episode workers through :data:`KEY_ENV`). Its loop
-is single-threaded: it waits until some workers' requests are ready, reads them all, runs
-them with :class:`icrsumo.agents.serve.BatchingCore` (one agent instance per episode, acts in
-batches of up to ``max_batch`` through the agent's ``act_batch`` hook) and answers. No
-request waits for a batch to fill: a batch is whatever arrived while the previous one ran.
+:func:`start_server` starts the inference process (``spawn``) for one agent spec; it builds
+its agents on ``device`` (``agent_factory(spec, device)``: a learned agent's constructor
+argument). It listens on a Unix socket in a private folder (mode 0700) and accepts only clients
+that know its random key (``multiprocessing.connection``'s HMAC handshake). Its loop is
+single-threaded: it waits until some workers' requests are ready, reads them all, runs them
+with :class:`icrsumo.agents.batching.BatchingCore` (one agent instance per episode, acts in
+batches of up to ``max_batch`` through the agent's ``act_batch`` hook) and answers. No request
+waits for a batch to fill: a batch is whatever arrived while the previous one ran.
 
 ``processes`` > 1 starts several such processes per agent (:func:`start_group`); each worker
-uses one. In the workers, the spec ``batched:SOCKET[,SOCKET...]#NAME`` makes a
-:class:`BatchedAgent`: one episode session, one connection per worker process. Observations
-and actions travel pickled, raw (no compression): a BEV frame is 7 x 128 x 128 bytes. The
-inference processes are the only ones that load the network, so the workers' cores are left to
-SUMO and the runner.
+uses one. The episode workers get a :class:`BatchedFactory` (the sockets, the agent's name and
+the key: a picklable object that travels inside the evaluation's jobs) that makes a
+:class:`BatchedAgent` per episode: one episode session, over one connection per worker process
+(state of the factory). Observations and actions travel pickled, raw (no compression): a BEV
+frame is 7 x 128 x 128 bytes. The inference processes are the only ones that load the network,
+so the workers' cores are left to SUMO and the episode loop.
 
 Results on CPU are those of the in-process agent, bit for bit (a learned agent runs a CPU
 batch sample by sample). On a GPU they differ from CPU inference by float rounding, and the
@@ -34,23 +35,19 @@ import secrets
 import tempfile
 import threading
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Client, Connection, Listener, wait
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError
+from ..errors import InputError, describe
 from .base import AgentError, EpisodeInfo, Observation
+from .batching import TASK_KINDS, BatchingCore, Task
+from .registry import agent_factory, agent_name
 
-#: agent spec prefix of a worker's client: ``batched:SOCKET[,SOCKET...]#NAME``
-BATCHED_PREFIX = "batched:"
-#: environment variable carrying the hex key of the inference processes to the workers
-KEY_ENV = "ICRSUMO_BATCH_KEY"
 #: s to wait for an inference process to load its agent and listen
 START_TIMEOUT = 180.0
-KINDS = ("reset", "act", "close")
-#: agent name -> statistics of its last stopped inference process (for benchmarks)
-LAST_STATS: dict[str, dict] = {}
 
 
 @dataclass
@@ -59,6 +56,7 @@ class BatchServer:
 
     name: str
     address: str
+    key: bytes = field(repr=False)
     proc: Any
     control: Connection
     folder: tempfile.TemporaryDirectory
@@ -91,13 +89,13 @@ class ServerGroup:
     name: str
     servers: list[BatchServer]
 
-    @property
-    def worker_spec(self) -> str:
-        """The agent spec the episode workers use: ``batched:SOCKET[,SOCKET...]#NAME``."""
-        return f"{BATCHED_PREFIX}{','.join(s.address for s in self.servers)}#{self.name}"
+    def factory(self) -> BatchedFactory:
+        """The picklable agent factory the episode workers use."""
+        return BatchedFactory([s.address for s in self.servers], self.name, self.servers[0].key)
 
     def stop(self) -> dict:
-        """Stop every process; returns their statistics added up (largest_batch: the largest)."""
+        """Stop every process; returns their statistics added up (largest_batch: the largest;
+        processes: their number)."""
         parts = [s.stop() for s in self.servers]
         total: dict = {}
         for part in parts:
@@ -106,16 +104,18 @@ class ServerGroup:
                     total.get(key, 0) + value
         if total:
             total["processes"] = len(parts)
-        LAST_STATS[self.name] = total
         return total
 
 
-def start_group(spec: str, device: str, max_batch: int = 32, processes: int = 1) -> ServerGroup:
-    """``processes`` inference processes of agent ``spec`` (see :func:`start_server`)."""
+def start_group(spec: str, device: str, max_batch: int = 32, processes: int = 1,
+                factory: Callable | None = None) -> ServerGroup:
+    """``processes`` inference processes of agent ``spec`` sharing one key (see
+    :func:`start_server`)."""
+    key = secrets.token_bytes(32)
     servers: list[BatchServer] = []
     try:
         for _ in range(processes):
-            servers.append(start_server(spec, device, max_batch))
+            servers.append(start_server(spec, device, max_batch, key=key, factory=factory))
     except BaseException:
         for server in servers:
             server.stop()
@@ -123,18 +123,18 @@ def start_group(spec: str, device: str, max_batch: int = 32, processes: int = 1)
     return ServerGroup(servers[0].name, servers)
 
 
-def start_server(spec: str, device: str, max_batch: int = 32) -> BatchServer:
+def start_server(spec: str, device: str, max_batch: int = 32, key: bytes | None = None,
+                 factory: Callable | None = None) -> BatchServer:
     """Start the inference process of agent ``spec`` on ``device`` (cpu, cuda, cuda:N, auto)
-    and wait until it listens. Errors (a privileged agent, no CUDA, ...) are InputErrors."""
-    from .registry import agent_factory, agent_name
-
-    factory = agent_factory(spec)
+    and wait until it listens. ``key``: the clients' key (default: a fresh random one);
+    ``factory``: the spec's factory when the caller has resolved it already. Errors (a
+    privileged agent, no CUDA, ...) are InputErrors."""
+    factory = factory if factory is not None else agent_factory(spec)
     if getattr(factory, "privileged", False):
         raise InputError("--batch-inference", spec, "is a privileged agent: it needs the simulator's "
                          "World view, which only the episode worker has", "leave out --batch-inference")
     name = agent_name(spec, factory)
-    key = bytes.fromhex(os.environ[KEY_ENV]) if os.environ.get(KEY_ENV) else secrets.token_bytes(32)
-    os.environ[KEY_ENV] = key.hex()
+    key = key if key is not None else secrets.token_bytes(32)
     folder = tempfile.TemporaryDirectory(prefix="icrsumo-batch-")  # mode 0700
     address = str(Path(folder.name) / "agent.sock")
     ctx = multiprocessing.get_context("spawn")
@@ -154,25 +154,22 @@ def start_server(spec: str, device: str, max_batch: int = 32) -> BatchServer:
         folder.cleanup()
         raise InputError("--batch-inference", device, f"the inference process of {spec} failed: {payload}",
                          "pick a device this machine has (cpu, cuda), or leave out --batch-inference")
-    return BatchServer(name, address, proc, control, folder)
+    return BatchServer(name, address, key, proc, control, folder)
 
 
 def _serve(spec: str, address: str, key: bytes, device: str, max_batch: int, control: Connection) -> None:
     """The inference process: load the agent, listen, answer batches until told to stop."""
-    from ..learn.agent import DEVICE_ENV
-    from .serve import BatchingCore, _describe, _Task
-
-    os.environ[DEVICE_ENV] = device
     try:
         if device.startswith("cuda"):
             import torch
 
             if not torch.cuda.is_available():
                 raise RuntimeError("CUDA is not available on this machine")
-        core = BatchingCore(spec, max_batch)
+        factory = agent_factory(spec, device)
+        core = BatchingCore(factory, max_batch, name=agent_name(spec, factory))
         listener = Listener(address, family="AF_UNIX", authkey=key)
     except Exception as err:  # reported to the parent as one line
-        control.send(("error", _describe(err)))
+        control.send(("error", describe(err)))
         return
     pending: list[Connection] = []
     lock = threading.Lock()
@@ -204,7 +201,7 @@ def _serve(spec: str, address: str, key: bytes, device: str, max_batch: int, con
             with contextlib.suppress(OSError):
                 control.send(("stats", {**core.stats, **{k: round(v, 3) for k, v in times.items()}}))
             return
-        tasks: list[tuple[Connection, _Task]] = []
+        tasks: list[tuple[Connection, Task]] = []
         for conn in ready:
             try:
                 kind, session, payload = conn.recv()
@@ -212,9 +209,9 @@ def _serve(spec: str, address: str, key: bytes, device: str, max_batch: int, con
                 conns.remove(conn)
                 conn.close()
                 continue
-            task = _Task(str(kind), str(session), payload)
-            if kind not in KINDS:
-                task.status, task.error = 400, f"unknown request {kind!r} (use {', '.join(KINDS)})"
+            task = Task(str(kind), str(session), payload)
+            if kind not in TASK_KINDS:
+                task.status, task.error = 400, f"unknown request {kind!r} (use {', '.join(TASK_KINDS)})"
             tasks.append((conn, task))
         t2 = time.perf_counter()
         core.run([t for _, t in tasks if t.status == 200])
@@ -230,8 +227,66 @@ def _serve(spec: str, address: str, key: bytes, device: str, max_batch: int, con
 
 
 # --------------------------------------------------------------------------- worker side
-_CONNS: dict[str, Connection] = {}
-_IDS = itertools.count()
+class BatchedFactory:
+    """The agent factory of an episode worker under ``--batch-inference``: makes a
+    :class:`BatchedAgent` per episode. A worker process always uses the same inference process
+    (its process id modulo their number) over one connection, kept here (state of this object,
+    never pickled: each process opens its own). Picklable; equal factories (same addresses,
+    name and key) are interchangeable."""
+
+    privileged = False
+
+    def __init__(self, addresses: Sequence[str], name: str, key: bytes) -> None:
+        self.addresses, self.name, self.key = tuple(addresses), name, bytes(key)
+        self._conns: dict[str, Connection] = {}
+        self._pid = os.getpid()
+        self._ids = itertools.count()
+
+    def __call__(self) -> BatchedAgent:
+        return BatchedAgent(self, self.addresses[os.getpid() % len(self.addresses)])
+
+    def _ident(self) -> tuple:
+        return (self.addresses, self.name, self.key)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, BatchedFactory) and self._ident() == other._ident()
+
+    def __hash__(self) -> int:
+        return hash(self._ident())
+
+    def __repr__(self) -> str:
+        return f"BatchedFactory({list(self.addresses)!r}, {self.name!r})"
+
+    def __getstate__(self) -> dict:
+        return {"addresses": self.addresses, "name": self.name, "key": self.key}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(state["addresses"], state["name"], state["key"])
+
+    def session_id(self) -> str:
+        """A fresh session id (an id only: no effect on any result)."""
+        return f"{os.getpid()}-{next(self._ids)}-{time.monotonic_ns()}"
+
+    def connection(self, address: str) -> Connection:
+        """This process's connection to the inference process at ``address``."""
+        if self._pid != os.getpid():  # inherited through a fork: not ours to use
+            self._conns, self._pid = {}, os.getpid()
+        conn = self._conns.get(address)
+        if conn is None:
+            conn = self._conns[address] = Client(address, family="AF_UNIX", authkey=self.key)
+        return conn
+
+    def drop(self, address: str) -> None:
+        """Forget a broken connection (the next call reconnects)."""
+        conn = self._conns.pop(address, None)
+        if conn is not None:
+            with contextlib.suppress(OSError):
+                conn.close()
+
+    def close(self) -> None:
+        """Close this process's connections."""
+        for address in list(self._conns):
+            self.drop(address)
 
 
 class BatchedAgent:
@@ -239,20 +294,17 @@ class BatchedAgent:
 
     privileged = False
 
-    def __init__(self, address: str, name: str) -> None:
-        self.address, self.name = address, name
+    def __init__(self, factory: BatchedFactory, address: str) -> None:
+        self.factory, self.address, self.name = factory, address, factory.name
         self.session: str | None = None
 
     def _call(self, kind: str, session: str, payload: Any) -> Any:
         try:
-            conn = _CONNS.get(self.address)
-            if conn is None:
-                conn = _CONNS[self.address] = Client(self.address, family="AF_UNIX",
-                                                     authkey=bytes.fromhex(os.environ.get(KEY_ENV, "")))
+            conn = self.factory.connection(self.address)
             conn.send((kind, session, payload))
             status, result, error = conn.recv()
         except (OSError, EOFError, multiprocessing.AuthenticationError) as err:
-            _CONNS.pop(self.address, None)
+            self.factory.drop(self.address)
             raise AgentError(f"the batched inference process of {self.name} is not answering "
                              f"({type(err).__name__}: {err})") from None
         if status != 200:
@@ -261,7 +313,7 @@ class BatchedAgent:
 
     def reset(self, info: EpisodeInfo) -> None:
         self.close()
-        session = f"{os.getpid()}-{next(_IDS)}-{time.monotonic_ns()}"  # an id only
+        session = self.factory.session_id()
         self._call("reset", session, info)
         self.session = session
 
@@ -276,17 +328,3 @@ class BatchedAgent:
             session, self.session = self.session, None
             with contextlib.suppress(AgentError):
                 self._call("close", session, None)
-
-
-class BatchedFactory:
-    """``agent_factory`` of ``batched:SOCKET[,SOCKET...]#NAME``: a worker process always uses
-    the same inference process (its process id modulo their number)."""
-
-    privileged = False
-
-    def __init__(self, target: str) -> None:
-        addresses, _, self.name = target.partition("#")
-        self.addresses = addresses.split(",")
-
-    def __call__(self) -> BatchedAgent:
-        return BatchedAgent(self.addresses[os.getpid() % len(self.addresses)], self.name)

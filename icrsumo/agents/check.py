@@ -15,10 +15,6 @@ behind on that thread and the check still ends.
 from __future__ import annotations
 
 import contextlib
-import queue
-import threading
-import time
-import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -26,9 +22,10 @@ from typing import Any
 import numpy as np
 
 from ..cache import DEFAULT_ROUTE, DEFAULT_SUITE, bundled_route
-from ..errors import InputError
-from .base import Action, AgentError, Observation, batch_hook, validate_action
+from ..errors import InputError, describe
+from .base import Action, AgentError, AgentTimeout, Observation, batch_hook, validate_action
 from .registry import BUILTIN, REMOTE_PREFIX, agent_factory, load_class
+from .watch import ThreadWatch
 
 #: decisions per run (0.1 s each)
 MAX_DECISIONS = 300
@@ -59,47 +56,13 @@ class CheckReport:
         return [f.text for f in self.findings if f.ok is False]
 
 
-class _Hung(Exception):
-    pass
-
-
-class _Caller:
-    """Runs calls on one daemon thread with a time limit (a hung call keeps that thread)."""
-
-    def __init__(self) -> None:
-        self._in: queue.Queue = queue.Queue()
-        threading.Thread(target=self._loop, name="icrsumo-check-agent", daemon=True).start()
-
-    def _loop(self) -> None:
-        while True:
-            fn, args, box, done = self._in.get()
-            t0 = time.perf_counter()
-            try:
-                box["value"] = fn(*args)
-            except BaseException as err:  # reported to the caller
-                box["error"] = err
-            box["dt"] = time.perf_counter() - t0
-            done.set()
-
-    def call(self, timeout: float, fn: Callable, *args: Any) -> tuple[Any, float]:
-        """(result, seconds); re-raises the call's exception; _Hung after ``timeout`` s."""
-        box: dict[str, Any] = {}
-        done = threading.Event()
-        self._in.put((fn, args, box, done))
-        if not done.wait(timeout):
-            raise _Hung
-        if "error" in box:
-            raise box["error"]
-        return box.get("value"), box["dt"]
-
-
-def _where(err: BaseException) -> str:
-    tb = traceback.extract_tb(err.__traceback__)
-    return f" (at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno})" if tb else ""
+def _timed(watch: ThreadWatch, fn: Callable, *args: Any) -> tuple[Any, float]:
+    """(result, seconds) of one watched call; AgentTimeout when it hangs."""
+    return watch.call(fn, *args), watch.last_s
 
 
 def _raised(what: str, err: BaseException) -> str:
-    return f"{what} raised {type(err).__name__}: {err}{_where(err)}"
+    return f"{what} raised {describe(err)}"
 
 
 def _same(a: Action, b: Action) -> bool:
@@ -130,25 +93,26 @@ class _Run:
     info: Any = None
 
 
-def _drive(factory: Callable, caller: _Caller, scenario, iset, timeout: float, max_decisions: int,
+def _drive(factory: Callable, caller: ThreadWatch, scenario, iset, timeout: float, max_decisions: int,
            keep_obs: int) -> _Run:
-    from ..runner import Episode, RunOptions
+    from ..sim.episode import Episode
 
     run = _Run([], [], [])
     try:
-        agent, _ = caller.call(timeout, factory)
-    except _Hung:
+        agent, _ = _timed(caller, factory)
+    except AgentTimeout:
         run.problem, run.hung = f"creating the agent did not finish within {timeout:g} s", True
         return run
     except Exception as err:
         run.problem = _raised("creating the agent", err)
         return run
     privileged = bool(getattr(agent, "privileged", False))
-    with Episode(scenario, iset, RunOptions(), privileged=privileged) as ep:
+    needs_route = bool(getattr(agent, "needs_route", False))
+    with Episode(scenario, iset, privileged=privileged, needs_route=needs_route) as ep:
         run.info = ep.info
         try:
-            caller.call(timeout, agent.reset, ep.info)
-        except _Hung:
+            _timed(caller, agent.reset, ep.info)
+        except AgentTimeout:
             run.problem, run.hung = f"reset() did not answer within {timeout:g} s", True
             return run
         except Exception as err:
@@ -159,8 +123,8 @@ def _drive(factory: Callable, caller: _Caller, scenario, iset, timeout: float, m
             n = len(run.actions) + 1
             at = f"act() at decision {n} (t = {obs.t:.2f} s)"
             try:
-                action, dt = caller.call(timeout, agent.act, obs)
-            except _Hung:
+                action, dt = _timed(caller, agent.act, obs)
+            except AgentTimeout:
                 run.problem, run.hung = f"{at} did not answer within {timeout:g} s", True
                 break
             except Exception as err:
@@ -179,10 +143,11 @@ def _drive(factory: Callable, caller: _Caller, scenario, iset, timeout: float, m
         run.termination = ep.termination if ep.done else f"stopped after {len(run.actions)} decisions"
     if callable(getattr(agent, "close", None)):
         try:
-            caller.call(timeout, agent.close)
-        except (_Hung, Exception) as err:  # noqa: BLE001 - reported, never fatal
+            _timed(caller, agent.close)
+        except Exception as err:  # noqa: BLE001 - reported, never fatal
             if not run.problem:
-                run.problem = "close() did not answer" if isinstance(err, _Hung) else _raised("close()", err)
+                run.problem = "close() did not answer" if isinstance(err, AgentTimeout) else \
+                    _raised("close()", err)
     return run
 
 
@@ -221,10 +186,10 @@ def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUIT
 
     scenario = read_scenario(sc_dir)
     iset = read_instruction_sets(instr)[0]
-    caller = _Caller()
+    caller = ThreadWatch(timeout)
     try:
-        probe, _ = caller.call(timeout, factory)
-    except _Hung:
+        probe, _ = _timed(caller, factory)
+    except AgentTimeout:
         found.append(Finding(False, f"creating the agent did not finish within {timeout:g} s"))
         return report()
     except Exception as err:
@@ -245,8 +210,8 @@ def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUIT
     else:
         found.append(Finding(True, "privileged = False"))
     if callable(getattr(probe, "close", None)):
-        with contextlib.suppress(_Hung, Exception):  # a later run reports close() problems
-            caller.call(timeout, probe.close)
+        with contextlib.suppress(Exception):  # a later run reports close() problems
+            _timed(caller, probe.close)
     first = _drive(factory, caller, scenario, iset, timeout, max_decisions, keep_obs=4)
     runs = f"{len(first.actions)} decisions on {scenario.route_id} ({first.termination or 'not finished'})"
     if first.problem:
@@ -288,11 +253,11 @@ def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUIT
     hook = batch_hook(type(probe))
     if first.observations and hook is not None:
         try:
-            pair = [caller.call(timeout, factory)[0] for _ in range(2)]
+            pair = [_timed(caller, factory)[0] for _ in range(2)]
             for a in pair:
-                caller.call(timeout, a.reset, first.info)
+                _timed(caller, a.reset, first.info)
             for i, o in enumerate(first.observations):
-                batch, _ = caller.call(timeout, hook, pair, [o, o])
+                batch, _ = _timed(caller, hook, pair, [o, o])
                 if not isinstance(batch, (list, tuple)) or len(batch) != 2:
                     found.append(Finding(False, "act_batch() must return one action per observation "
                                                 "(a list of 2 for 2)"))
@@ -304,7 +269,7 @@ def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUIT
             else:
                 found.append(Finding(True, f"act_batch() matches act() over {len(first.observations)} "
                                            f"decisions of 2 sessions"))
-        except _Hung:
+        except AgentTimeout:
             found.append(Finding(False, f"act_batch() did not answer within {timeout:g} s"))
         except Exception as err:
             found.append(Finding(False, _raised("act_batch()", err)))

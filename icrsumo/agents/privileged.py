@@ -332,6 +332,8 @@ class RouteOracle(PathDriver):
     """Follows the scenario's route; ignores the instruction (an instruction-blind upper bound)."""
 
     name = "route-oracle"
+    #: the only agent handed the route (World.route); every other one gets None
+    needs_route = True
 
     def choose(self, w: World, edge: str, options: list[str], tentative: bool) -> str | None:
         edges = w.route.edges if w.route is not None else ()

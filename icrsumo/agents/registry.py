@@ -1,30 +1,151 @@
-"""Agent specs -> agent factories: built-in names, ``module:Class``, ``path/file.py:Class`` or
-``remote:http://HOST:PORT``."""
+"""The agent registry and agent specs.
+
+An agent is named by a *spec*: a registered name (the built-ins: ``route-oracle``,
+``instruction-follower`` and the learned agents whose checkpoints ship), ``module:Class``,
+``path/file.py:Class`` or ``remote:http://HOST:PORT``. :func:`agent_factory` turns a spec into
+a zero-argument factory of fresh agents (InputErrors for bad specs).
+
+Names are registered explicitly with :func:`register`, which refuses a name that is already
+taken (as Gymnasium's environment registry and waymax's metric registry do)::
+
+    from icrsumo.agents.registry import register
+    register("my-agent", MyAgent, description="drives from the BEV raster")
+
+A factory with a ``device`` keyword (the learned agents: ``LearnedAgent(checkpoint,
+device="cpu")``) is built on another device with ``agent_factory(spec, device="cuda")``.
+"""
 
 from __future__ import annotations
 
 import importlib
 import importlib.util
+import inspect
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from ..errors import InputError
 from ..learn.agent import CHECKPOINTS, NgramAgent, NgramAugAgent, TokenAgent
 from .base import Agent
 from .privileged import InstructionFollower, RouteOracle
 
-BUILTIN: dict[str, type] = {"route-oracle": RouteOracle, "instruction-follower": InstructionFollower}
-# learned agents whose checkpoints ship with the package (torch loads on first use)
-BUILTIN.update({cls.name: cls for cls in (TokenAgent, NgramAgent, NgramAugAgent)
-                if (CHECKPOINTS / cls.checkpoint).is_file()})
-#: the agent `icrsumo evaluate` uses when none is named: the shipped learned agent with the
-#: best baseline DS on the tiny suite (96.2 against 89.6 and 88.3: README, Learned agents)
-DEFAULT_AGENT = "bev-token" if "bev-token" in BUILTIN else "instruction-follower"
 #: ``remote:http://HOST:PORT``: an agent behind an icrsumo-agent/1 server (icrsumo.agents.remote)
 REMOTE_PREFIX = "remote:"
-#: ``batched:SOCKET#NAME``: set by ``evaluate --batch-inference`` for its workers (icrsumo.agents.batched)
-BATCHED_PREFIX = "batched:"
+
+
+@dataclass(frozen=True)
+class AgentEntry:
+    """A registered agent: its ``name`` (the spec), its ``factory`` (a zero-argument callable,
+    usually the agent class) and a one-line ``description``."""
+
+    name: str
+    factory: Callable[..., Agent]
+    description: str = ""
+
+
+class AgentRegistry(Mapping[str, Callable[..., Agent]]):
+    """Registered agent names -> their factories (read-only as a mapping; change it with
+    :meth:`register` and :meth:`unregister`)."""
+
+    def __init__(self) -> None:
+        self._entries: dict[str, AgentEntry] = {}
+
+    def register(self, name: str, factory: Callable[..., Agent], *, description: str = "") -> AgentEntry:
+        """Register ``factory`` under ``name``; a ValueError when the name is taken or not a
+        valid spec (empty, with whitespace, or with ``:``, which marks module:Class and remote
+        specs), a TypeError when ``factory`` is not callable."""
+        if not isinstance(name, str) or not name or ":" in name or any(c.isspace() for c in name):
+            raise ValueError(f"agent name {name!r} is not valid: use a non-empty name without ':' or "
+                             f"whitespace, e.g. 'my-agent'")
+        if not callable(factory):
+            raise TypeError(f"cannot register agent {name!r}: its factory {factory!r} is not callable "
+                            f"(pass the agent class or a zero-argument function)")
+        old = self._entries.get(name)
+        if old is not None:
+            raise ValueError(f"agent {name!r} is already registered (by {_qualname(old.factory)}): pick "
+                             f"another name, or unregister({name!r}) first")
+        entry = self._entries[name] = AgentEntry(name, factory, description)
+        return entry
+
+    def unregister(self, name: str) -> AgentEntry:
+        """Remove ``name`` (KeyError naming the registered ones when it is not registered)."""
+        try:
+            return self._entries.pop(name)
+        except KeyError:
+            raise KeyError(f"agent {name!r} is not registered (registered: {', '.join(self)})") from None
+
+    def entry(self, name: str) -> AgentEntry:
+        return self._entries[name]
+
+    def __getitem__(self, name: str) -> Callable[..., Agent]:
+        return self._entries[name].factory
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._entries)
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+
+def _qualname(obj: object) -> str:
+    return f"{getattr(obj, '__module__', '?')}.{getattr(obj, '__qualname__', type(obj).__name__)}"
+
+
+#: the process's agent registry
+REGISTRY = AgentRegistry()
+register = REGISTRY.register
+unregister = REGISTRY.unregister
+#: registered name -> factory (the registry as a read-only mapping; the name older callers use)
+BUILTIN: Mapping[str, Callable[..., Agent]] = REGISTRY
+
+register("route-oracle", RouteOracle,
+         description="privileged: follows the scenario's route (an upper reference)")
+register("instruction-follower", InstructionFollower,
+         description="privileged: follows the instructions as a careful driver would")
+# learned agents whose checkpoints ship with the package (torch loads on first use)
+for _cls in (TokenAgent, NgramAgent, NgramAugAgent):
+    if (CHECKPOINTS / _cls.checkpoint).is_file():
+        register(_cls.name, _cls, description=(_cls.__doc__ or "").strip().splitlines()[0])
+del _cls
+
+#: the agent `icrsumo evaluate` uses when none is named: the shipped learned agent with the
+#: best baseline DS on the tiny suite (96.2 against 89.6 and 88.3: README, Learned agents)
+DEFAULT_AGENT = "bev-token" if "bev-token" in REGISTRY else "instruction-follower"
+
+
+@dataclass(frozen=True)
+class OnDevice:
+    """A factory of ``factory``'s agents on ``device`` (calls ``factory(device=device)``).
+    ``name``, ``privileged``, ``needs_route`` and the rest are the factory's; ``agent_class``
+    lets :func:`icrsumo.agents.base.batch_hook` find the class's ``act_batch``. Picklable when
+    the factory is."""
+
+    factory: Callable[..., Agent]
+    device: str
+
+    def __call__(self) -> Agent:
+        return self.factory(device=self.device)
+
+    @property
+    def agent_class(self) -> Any:
+        return self.factory
+
+    def __getattr__(self, attr: str) -> Any:  # name, privileged, needs_route, ...
+        if attr.startswith("__") or attr in ("factory", "device"):
+            raise AttributeError(attr)
+        return getattr(self.factory, attr)
+
+
+def takes_device(factory: object) -> bool:
+    """Whether ``factory`` accepts a ``device`` keyword (the learned agents do)."""
+    try:
+        params = inspect.signature(factory).parameters  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return False
+    p = params.get("device")
+    return p is not None and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
 
 
 def load_class(spec: str) -> type:
@@ -33,7 +154,7 @@ def load_class(spec: str) -> type:
     target, _, cls_name = spec.rpartition(":")
     if not target or not cls_name:
         raise InputError("--agent", spec, "not a built-in agent nor MODULE:CLASS",
-                         f"use one of {', '.join(BUILTIN)}, a module:Class, path/file.py:Class or "
+                         f"use one of {', '.join(REGISTRY)}, a module:Class, path/file.py:Class or "
                          "remote:http://HOST:PORT")
     try:
         if target.endswith(".py"):
@@ -70,19 +191,21 @@ def _import_class(spec: str) -> type:
     return cls
 
 
-def agent_factory(spec: str) -> Callable[[], Agent]:
-    """A zero-argument factory of fresh agents for ``spec``; errors are InputErrors."""
-    if spec in BUILTIN:
-        return BUILTIN[spec]
-    if spec.startswith(REMOTE_PREFIX):
+def agent_factory(spec: str, device: str | None = None) -> Callable[[], Agent]:
+    """A zero-argument factory of fresh agents for ``spec``; errors are InputErrors. With
+    ``device`` (cpu, cuda, cuda:N, auto), a factory that takes a ``device`` keyword makes its
+    agents there (:class:`OnDevice`); other agents ignore it."""
+    if spec in REGISTRY:
+        factory: Callable[..., Agent] = REGISTRY[spec]
+    elif spec.startswith(REMOTE_PREFIX):
         from .remote import remote_factory
 
         return remote_factory(spec[len(REMOTE_PREFIX):])
-    if spec.startswith(BATCHED_PREFIX):  # internal: an episode worker of --batch-inference
-        from .batched import BatchedFactory
-
-        return BatchedFactory(spec[len(BATCHED_PREFIX):])
-    return _import_class(spec)
+    else:
+        factory = _import_class(spec)
+    if device is not None and takes_device(factory):
+        return OnDevice(factory, device)
+    return factory
 
 
 def agent_name(spec: str, agent: object) -> str:
@@ -90,6 +213,6 @@ def agent_name(spec: str, agent: object) -> str:
     return str(getattr(agent, "name", "") or spec)
 
 
-def make_agent(spec: str) -> Agent:
-    """A fresh instance of the agent ``spec``."""
-    return agent_factory(spec)()
+def make_agent(spec: str, device: str | None = None) -> Agent:
+    """A fresh instance of the agent ``spec`` (on ``device``, see :func:`agent_factory`)."""
+    return agent_factory(spec, device)()

@@ -21,14 +21,11 @@ import signal
 import sys
 import threading
 import time
-import traceback
-from collections import OrderedDict
-from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 
 from ..errors import InputError
-from .base import AgentError, batch_hook, validate_action
+from .batching import BatchingCore, Task
 from .registry import agent_factory, agent_name
 from .remote import PROTOCOL, ProtocolError, decode_info, decode_obs, encode_action, message
 
@@ -36,126 +33,19 @@ from .remote import PROTOCOL, ProtocolError, decode_info, decode_obs, encode_act
 MAX_BODY = 64 << 20
 
 
-@dataclass
-class _Task:
-    kind: str                      # reset | act | close
-    session: str
-    payload: Any = None
-    done: threading.Event = field(default_factory=threading.Event)
-    result: Any = None
-    status: int = 200
-    error: str = ""
+class AgentServer(BatchingCore):
+    """An HTTP server for agent ``spec`` on ``host:port`` (port 0: a free one, see ``.port``);
+    ``device``: where a learned agent runs (cpu by default, cuda, cuda:N, auto)."""
 
-
-def _describe(err: BaseException) -> str:
-    """``Type: message at file.py:line`` (the innermost frame)."""
-    tb = traceback.extract_tb(err.__traceback__)
-    where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
-    return f"{type(err).__name__}: {err}{where}"
-
-
-class BatchingCore:
-    """The transport-independent part of an agent server for ``spec``: one agent instance per
-    session, the act batches (``max_batch``) and their statistics. ``run(tasks)`` runs tasks
-    that arrived together: resets and closes first (a session's reset always precedes its acts:
-    its client waits), then the acts in batches. Used by the HTTP server below and by the
-    in-evaluation batched inference process (:mod:`icrsumo.agents.batched`)."""
-
-    def __init__(self, spec: str, max_batch: int = 8, max_sessions: int = 256) -> None:
-        if max_batch < 1:
-            raise InputError("--max-batch", str(max_batch), "must be at least 1", "give a positive count")
-        factory = agent_factory(spec)
+    def __init__(self, spec: str, host: str = "127.0.0.1", port: int = 0, max_batch: int = 8,
+                 max_sessions: int = 256, device: str | None = None) -> None:
+        factory = agent_factory(spec, device)
         if getattr(factory, "privileged", False):
             raise InputError("serve-agent", spec, "is a privileged agent: it needs the simulator's World "
                              "view, which is not sent over the network", "serve a non-privileged agent")
-        self.spec, self.factory, self.name = spec, factory, agent_name(spec, factory)
-        self.batch = batch_hook(factory)
-        self.batch_hook = self.batch is not None
-        self.max_batch, self.max_sessions = max_batch, max_sessions
-        self.sessions: OrderedDict[str, Any] = OrderedDict()
-        self.stats = {"resets": 0, "acts": 0, "batches": 0, "largest_batch": 0}
-
-    def run(self, tasks: list[_Task]) -> None:
-        """Run ``tasks`` (each gets ``status``, ``result`` / ``error`` and is marked done)."""
-        acts = [t for t in tasks if t.kind == "act"]
-        for t in tasks:
-            if t.kind != "act":
-                self._run_other(t)
-        for i in range(0, len(acts), self.max_batch):
-            self._run_acts(acts[i:i + self.max_batch])
-
-    def _run_other(self, t: _Task) -> None:
-        try:
-            if t.kind == "reset":
-                agent = self.factory()
-                agent.reset(t.payload)
-                self.sessions[t.session] = agent
-                self.sessions.move_to_end(t.session)
-                while len(self.sessions) > self.max_sessions:  # forget the least recently used
-                    self.sessions.popitem(last=False)
-                self.stats["resets"] += 1
-            else:
-                agent = self.sessions.pop(t.session, None)
-                if agent is not None and callable(getattr(agent, "close", None)):
-                    agent.close()
-            t.result = None
-        except Exception as err:  # the user's agent failed: the client gets the reason
-            t.status, t.error = 500, f"{t.kind}() raised {_describe(err)}"
-        t.done.set()
-
-    def _run_acts(self, batch: list[_Task]) -> None:
-        live = []
-        for t in batch:
-            agent = self.sessions.get(t.session)
-            if agent is None:
-                t.status, t.error = 404, (f"unknown session {t.session!r}: POST /reset first (the server "
-                                          f"may have restarted or dropped the session)")
-                t.done.set()
-            else:
-                self.sessions.move_to_end(t.session)
-                live.append((t, agent))
-        if not live:
-            return
-        self.stats["batches"] += 1
-        self.stats["acts"] += len(live)
-        self.stats["largest_batch"] = max(self.stats["largest_batch"], len(live))
-        if self.batch_hook and len(live) > 1:
-            try:
-                actions = self.batch([a for _, a in live], [t.payload for t, _ in live])
-                if not isinstance(actions, (list, tuple)) or len(actions) != len(live):
-                    raise AgentError(f"act_batch() returned {type(actions).__name__} of "
-                                     f"{len(actions) if hasattr(actions, '__len__') else '?'} actions "
-                                     f"for {len(live)} observations")
-                results = [(a, None) for a in actions]
-            except Exception as err:
-                results = [(None, err)] * len(live)
-        else:
-            results = []
-            for t, agent in live:
-                try:
-                    results.append((agent.act(t.payload), None))
-                except Exception as err:
-                    results.append((None, err))
-        for (t, _), (action, err) in zip(live, results):
-            if err is None:
-                try:
-                    t.result = validate_action(action)
-                except AgentError as bad:
-                    t.status, t.error = 422, str(bad)
-            elif isinstance(err, AgentError):
-                t.status, t.error = 422, str(err)
-            else:
-                t.status, t.error = 500, f"act() raised {_describe(err)}"
-            t.done.set()
-
-
-class AgentServer(BatchingCore):
-    """An HTTP server for agent ``spec`` on ``host:port`` (port 0: a free one, see ``.port``)."""
-
-    def __init__(self, spec: str, host: str = "127.0.0.1", port: int = 0, max_batch: int = 8,
-                 max_sessions: int = 256) -> None:
-        super().__init__(spec, max_batch, max_sessions)
-        self._queue: queue.Queue[_Task | None] = queue.Queue()
+        super().__init__(factory, max_batch, max_sessions, name=agent_name(spec, factory))
+        self.spec = spec
+        self._queue: queue.Queue[Task | None] = queue.Queue()
         self._worker = threading.Thread(target=self._work, name="icrsumo-agent-worker", daemon=True)
         self._worker.start()
         server = self
@@ -192,7 +82,7 @@ class AgentServer(BatchingCore):
         self.httpd.server_close()
         self._queue.put(None)
 
-    def submit(self, task: _Task) -> _Task:
+    def submit(self, task: Task) -> Task:
         self._queue.put(task)
         task.done.wait()
         return task
@@ -266,7 +156,7 @@ class _Handler(BaseHTTPRequestHandler):
                 decode_obs(doc.get("obs")) if kind == "act" else None
         except (ValueError, ProtocolError) as err:
             return self._error(400, f"malformed request: {err}")
-        task = self.owner.submit(_Task(kind, session, payload))
+        task = self.owner.submit(Task(kind, session, payload))
         if task.status != 200:
             return self._error(task.status, task.error)
         if kind != "act":
@@ -278,9 +168,10 @@ class _Handler(BaseHTTPRequestHandler):
         self._send(200, body)
 
 
-def serve(spec: str, host: str = "127.0.0.1", port: int = 8765, max_batch: int = 8) -> None:
-    """Serve ``spec`` until interrupted (the ``icrsumo serve-agent`` command)."""
-    server = AgentServer(spec, host, port, max_batch)
+def serve(spec: str, host: str = "127.0.0.1", port: int = 8765, max_batch: int = 8,
+          device: str | None = None) -> None:
+    """Serve ``spec`` (on ``device``) until interrupted (the ``icrsumo serve-agent`` command)."""
+    server = AgentServer(spec, host, port, max_batch, device=device)
     print(f"icrsumo: serving agent {server.name!r} ({spec}) on {server.url} (protocol {PROTOCOL}, "
           f"{'act_batch' if server.batch_hook else 'act per session'}, max batch {max_batch}); "
           f"Ctrl-C stops", file=sys.stderr, flush=True)

@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..types import Instruction, InstructionSet, Intent, Maneuver, Notice
+from ..vocab import Family
 from .banks import ORDINALS, Banks, fill
 
 FAR_M, NEAR_M, SINGLE_M = 80.0, 20.0, 50.0
@@ -153,5 +154,5 @@ def build_baseline(
                     end=round(m.pos + AFTER_M, 2), text=phr[int(rng.integers(len(phr)))],
                     type=ntype, intent=Intent.STOP,
                 ))
-    return InstructionSet(route_id=route_id, family="baseline", k=0, seed=seed,
+    return InstructionSet(route_id=route_id, family=Family.BASELINE, k=0, seed=seed,
                           instructions=tuple(b.items), notices=tuple(notices))

@@ -22,11 +22,13 @@ import numpy as np
 
 from ..errors import InputError
 from ..types import Instruction, InstructionSet, Intent
+from ..vocab import FAMILIES
 from .banks import CONTRADICTS, Banks, Entry, fill
 from .intent import classify_intent
 from .noise import apply_ops
 
-FAMILIES = ("paraphrase", "ambiguity", "noise", "misleading")
+__all__ = ["FAMILIES", "make_variants"]
+
 NOISE_TRIES = 25
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..fsio import read_json_doc
 from ..types import Instruction, InstructionSet, Intent, Maneuver, Notice
+from ..vocab import Family
 from .intent import classify_intent
 
 FORMAT = "icrsumo-instructions/1"
@@ -56,7 +57,8 @@ def read_instruction_sets(path: Path) -> list[InstructionSet]:
         for n in doc.get("notices", [])
     )
     return [
-        InstructionSet(route_id=doc["route_id"], family=s["family"], k=int(s["k"]), seed=int(s["seed"]),
-                       instructions=tuple(_instruction(i) for i in s["instructions"]), notices=notices)
+        InstructionSet(route_id=doc["route_id"], family=Family(s["family"]), k=int(s["k"]),
+                       seed=int(s["seed"]), instructions=tuple(_instruction(i) for i in s["instructions"]),
+                       notices=notices)
         for s in doc["sets"]
     ]

@@ -1,11 +1,12 @@
 """Learned agents: drive from the BEV raster, the speed and the instruction text alone.
 
-A :class:`LearnedAgent` runs a :class:`icrsumo.learn.nets.Policy` (one per checkpoint and
-process, loaded on first use with ``weights_only=True``) on each observation and hands its
+A :class:`LearnedAgent` runs a :class:`icrsumo.learn.nets.Policy` (one per checkpoint, device
+and process, loaded on first use with ``weights_only=True``) on each observation and hands its
 waypoints and target speed to the built-in controller; a stop probability above 0.5 sets the
 target speed to 0. Its only memory is the time it has been stopped
 (:class:`icrsumo.learn.labels.StopClock`). ``act_batch`` runs several episodes' observations in
-one forward pass per checkpoint (:func:`act_batch`, used by batched serving).
+one forward pass per checkpoint and device (:func:`act_batch`, used by batched serving). The
+inference device is a constructor argument (``device``: cpu by default, cuda, cuda:N, auto).
 
 Shipped checkpoints live in ``icrsumo/learn/checkpoints/<name>.pt`` with a model card
 ``<name>.md`` and the config ``<name>.toml`` that produced them.
@@ -13,7 +14,6 @@ Shipped checkpoints live in ``icrsumo/learn/checkpoints/<name>.pt`` with a model
 
 from __future__ import annotations
 
-import os
 from functools import cache
 from pathlib import Path
 
@@ -25,32 +25,30 @@ from .labels import StopClock
 CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
 
 
-#: environment variable naming the inference device of learned agents (cpu, cuda, auto)
-DEVICE_ENV = "ICRSUMO_AGENT_DEVICE"
-
-
 @cache
-def _policy(path: str):
+def _policy(path: str, device: str):
+    """The process's policy of checkpoint ``path`` on ``device`` (loaded once)."""
     from .nets import Policy
 
-    return Policy(Path(path), device=os.environ.get(DEVICE_ENV, "cpu"))
+    return Policy(Path(path), device=device)
 
 
 class LearnedAgent:
-    """A non-privileged agent around a checkpoint (``checkpoint``: a path)."""
+    """A non-privileged agent around a checkpoint (``checkpoint``: a path) whose network runs
+    on ``device`` (cpu, cuda, cuda:N, auto)."""
 
     name = "learned"
     privileged = False
     checkpoint: str = ""
 
-    def __init__(self, checkpoint: str | Path | None = None) -> None:
+    def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu") -> None:
         path = Path(checkpoint or self.checkpoint)
         if not path.is_absolute() and not path.is_file():
             path = CHECKPOINTS / path
         if not path.is_file():
             raise FileNotFoundError(f"{path}: agent checkpoint not found")
-        self.path = str(path)
-        self.policy = _policy(self.path)
+        self.path, self.device = str(path), device
+        self.policy = _policy(self.path, device)
         self.clock = StopClock()
 
     def reset(self, info: EpisodeInfo) -> None:
@@ -65,14 +63,14 @@ class LearnedAgent:
 
 def act_batch(agents: list[LearnedAgent], batch: list[Observation]) -> list[Action]:
     """Actions of several episodes' agents (``agents[i]`` sees ``batch[i]``) with one forward
-    pass per checkpoint: the batched-inference hook of ``icrsumo serve-agent`` and of
+    pass per checkpoint and device: the batched-inference hook of ``icrsumo serve-agent`` and of
     parallel evaluation. Each agent keeps its own stop clock."""
     actions: list[Action | None] = [None] * len(batch)
-    groups: dict[str, list[int]] = {}
+    groups: dict[tuple[str, str], list[int]] = {}
     for i, a in enumerate(agents):
-        groups.setdefault(a.path, []).append(i)
-    for path, idx in groups.items():
-        policy = _policy(path)
+        groups.setdefault((a.path, a.device), []).append(i)
+    for (path, device), idx in groups.items():
+        policy = _policy(path, device)
         obs = [batch[i] for i in idx]
         stopped = np.array([agents[i].clock.update(o.t, o.speed) for i, o in zip(idx, obs)], dtype=np.float32)
         out = policy(np.stack([o.bev for o in obs]),

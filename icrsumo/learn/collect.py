@@ -168,7 +168,7 @@ def episode_rng(seed: int, route_id: str, pass_k: int) -> np.random.Generator:
 
 def collect_episode(scenario_dir: str, pass_k: int, opts: CollectOptions) -> tuple[bytes, dict]:
     """Drive one (route, pass); returns the ``.npz`` bytes and a summary dict."""
-    from ..runner import run_episode
+    from ..sim.episode import run_episode
 
     sc = read_scenario(Path(scenario_dir))
     rng = episode_rng(opts.seed, sc.route_id, pass_k)

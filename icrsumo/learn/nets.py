@@ -26,12 +26,13 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ..vocab import Intent
 from .labels import ARC_M, STOP_BELOW
 from .text import TextEncoder
 
 CHECKPOINT_FORMAT = "icrsumo-agent/1"
 #: intents of the auxiliary head (the baseline's; others map to follow)
-INTENTS = ("follow", "left", "right", "straight", "lane_left", "lane_right")
+INTENTS = (Intent.FOLLOW, Intent.LEFT, Intent.RIGHT, Intent.STRAIGHT, Intent.LANE_LEFT, Intent.LANE_RIGHT)
 _ARC = torch.tensor(ARC_M, dtype=torch.float32)
 
 

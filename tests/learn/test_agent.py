@@ -8,6 +8,8 @@ from icrsumo.agents.base import EpisodeInfo, Observation
 from icrsumo.agents.registry import BUILTIN, make_agent
 from icrsumo.learn.agent import CHECKPOINTS, LearnedAgent, act_batch
 
+pytestmark = pytest.mark.sumo
+
 SHIPPED = sorted(p.stem for p in CHECKPOINTS.glob("*.pt"))
 LEARNED = [n for n, c in BUILTIN.items() if issubclass(c, LearnedAgent)]
 
@@ -61,8 +63,8 @@ def test_batched_inference_matches_single(name):
 def test_learned_agent_closed_loop_is_repeatable(name, converted, generated):
     from icrsumo.instructions.store import read_instruction_sets
     from icrsumo.logs import dumps_log
-    from icrsumo.runner import run_episode
     from icrsumo.scenario import find_scenarios, read_scenario
+    from icrsumo.sim.episode import run_episode
 
     sc = read_scenario(find_scenarios(converted["tiny"])[0])
     iset = read_instruction_sets(generated["tiny"] / f"{sc.route_id}.json")[0]

@@ -10,6 +10,8 @@ from icrsumo.errors import InputError
 from icrsumo.learn.collect import CollectOptions, collect, collect_episode
 from icrsumo.scenario import find_scenarios
 
+pytestmark = pytest.mark.sumo
+
 
 @pytest.fixture(scope="module")
 def one_route(converted):

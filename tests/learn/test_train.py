@@ -11,6 +11,8 @@ from icrsumo.learn import nets
 from icrsumo.learn.collect import CollectOptions, collect
 from icrsumo.learn.train import TrainConfig, load_dataset
 
+pytestmark = pytest.mark.sumo
+
 
 @pytest.fixture(scope="module")
 def tiny_data(converted, tmp_path_factory):

@@ -14,11 +14,18 @@ from pathlib import Path
 import pytest
 
 from icrsumo.cli import main
-from icrsumo.evaluate import EvalOptions, evaluate
+from icrsumo.evaluation import EvalOptions, run_evaluation
 from icrsumo.store import ResultStore
 
-AGENTS = Path(__file__).parent / "data" / "agents" / "user_agents.py"
+pytestmark = pytest.mark.sumo
+
+AGENTS = Path(__file__).parents[1] / "data" / "agents" / "user_agents.py"
 ROUTES = ("tiny_003", "tiny_012")
+
+
+def evaluate(opts: EvalOptions) -> dict:
+    """Run an evaluation; its summary."""
+    return run_evaluation(opts).summary
 
 
 def _opts(out, **kw):

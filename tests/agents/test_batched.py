@@ -4,7 +4,7 @@ episode workers over a Unix socket (icrsumo.agents.batched)."""
 from __future__ import annotations
 
 import json
-import os
+import pickle
 import sqlite3
 import subprocess
 import sys
@@ -14,28 +14,15 @@ import numpy as np
 import pytest
 
 from icrsumo.agents.base import AgentError, EpisodeInfo, Observation
-from icrsumo.agents.batched import BatchedAgent, start_server
+from icrsumo.agents.batched import BatchedFactory, start_server
 from icrsumo.agents.registry import make_agent
-from icrsumo.cache import bundled_route
 from icrsumo.cli import main
 from icrsumo.errors import InputError
-from icrsumo.evaluate import EvalOptions, evaluate
+from icrsumo.evaluation import EvalOptions, run_evaluation
+
+pytestmark = pytest.mark.sumo
 
 INFO = EpisodeInfo("r", "town", "net.xml", 0.05, 0.1, 7)
-
-
-@pytest.fixture(scope="module")
-def suite(tmp_path_factory) -> Path:
-    """A convert-routes folder holding tiny_003 (the cached bundled route)."""
-    path = tmp_path_factory.getbasetemp() / "icrsumo_cache"
-    old = os.environ.get("ICRSUMO_CACHE")
-    os.environ["ICRSUMO_CACHE"] = str(path)
-    sc_dir, _ = bundled_route("tiny_003")
-    yield sc_dir.parents[1]
-    if old is None:
-        os.environ.pop("ICRSUMO_CACHE", None)
-    else:
-        os.environ["ICRSUMO_CACHE"] = old
 
 
 def _obs(t: float, text: str) -> Observation:
@@ -56,11 +43,16 @@ def test_batched_cpu_evaluation_is_the_in_process_one(suite, tmp_path, capsys):
     summary.json byte-identical to the plain run."""
     opts = dict(suite=str(suite), agents=("bev-ngram", "route-oracle"), families=("misleading",), k=2,
                 workers=2)
-    evaluate(EvalOptions(out=tmp_path / "plain", quiet=True, **opts))
-    evaluate(EvalOptions(out=tmp_path / "batched", batch_inference="cpu", max_batch=4,
-                         inference_processes=2, **opts))
+    plain = run_evaluation(EvalOptions(out=tmp_path / "plain", quiet=True, **opts))
+    batched = run_evaluation(EvalOptions(out=tmp_path / "batched", batch_inference="cpu", max_batch=4,
+                                         inference_processes=2, **opts))
     err = capsys.readouterr().err
     assert "batched inference of bev-ngram on cpu (2 processes):" in err and "route-oracle on cpu" not in err
+    # the inference processes' statistics come back in the result (none without batch_inference)
+    assert plain.inference == {} and set(batched.inference) == {"bev-ngram"}
+    stats = batched.inference["bev-ngram"]
+    assert stats["processes"] == 2 and stats["resets"] == 3 and stats["acts"] > 0
+    assert 1 <= stats["largest_batch"] <= 4 and stats["batches"] <= stats["acts"]
     rows = _rows(tmp_path / "plain")
     assert len(rows) == 6 and all("done" in r for r in rows)
     assert _rows(tmp_path / "batched") == rows
@@ -71,7 +63,8 @@ def test_batched_cpu_evaluation_is_the_in_process_one(suite, tmp_path, capsys):
 def test_client_matches_agent_and_reports_a_dead_server():
     server = start_server("bev-ngram", "cpu", max_batch=8)
     try:
-        remote, local = BatchedAgent(server.address, server.name), make_agent("bev-ngram")
+        factory = BatchedFactory([server.address], server.name, server.key)
+        remote, local = factory(), make_agent("bev-ngram")
         for agent in (remote, local):
             agent.reset(INFO)
         texts = ["Turn left at the next intersection.", "In 30 meters, go straight."]
@@ -79,6 +72,11 @@ def test_client_matches_agent_and_reports_a_dead_server():
             obs = _obs(20.0 + 0.1 * i, texts[i % 2])
             a, b = remote.act(obs), local.act(obs)
             assert np.array_equal(a.waypoints, b.waypoints) and a.target_speed == b.target_speed
+        # the factory travels pickled inside jobs: the key goes with it, its connection does not
+        assert len(factory._conns) == 1
+        clone = pickle.loads(pickle.dumps(factory))
+        assert clone == factory and hash(clone) == hash(factory) and clone._conns == {}
+        assert clone.key == server.key
         remote.close()
         with pytest.raises(AgentError, match="act\\(\\) before reset"):
             remote.act(_obs(21.0, texts[0]))
@@ -110,7 +108,7 @@ def test_bad_batch_inference_options(suite, tmp_path, capsys):
 def test_closed_loop_script_runs_on_cpu(suite, tmp_path):
     """tools/batched_closed_loop.py end to end on CPU (in-process, the inference process and
     serve-agent): the same episodes in every setup, one JSON line (no timing assertions)."""
-    script = Path(__file__).resolve().parents[1] / "tools" / "batched_closed_loop.py"
+    script = Path(__file__).resolve().parents[2] / "tools" / "batched_closed_loop.py"
     proc = subprocess.run(
         [sys.executable, str(script), "--suite-dir", str(suite), "--agent", "bev-token", "--workers", "2",
          "--device", "cpu", "--families", "noise", "--k", "1", "--routes", "tiny_003",

@@ -15,7 +15,8 @@ from icrsumo.dynamics import Control, EgoState, VehicleParams
 from icrsumo.networks import load_net
 from icrsumo.render import BevRenderer, BevSpec
 from icrsumo.resources import bundled_towns
-from icrsumo.runner import _corners, _LaneHeading, _off_corners, _Route
+from icrsumo.sim.drivable import drivable_area
+from icrsumo.sim.sensors import LaneHeading, RouteProjection, footprint_corners, off_corners
 
 
 # ----------------------------------------------------------------------------- references
@@ -119,7 +120,7 @@ def test_route_locate_is_the_reference_float_for_float():
             poly[n // 2] = poly[n // 2 - 1]  # a zero-length segment
         if rng.random() < 0.2:  # a route that comes back on itself: equal distances
             poly = np.concatenate([poly, poly[::-1][1:]])
-        fast, ref = _Route(poly), _RefRoute(poly)
+        fast, ref = RouteProjection(poly), _RefRoute(poly)
         for j in range(40):
             x, y = poly[int(rng.integers(len(poly)))] + rng.normal(0.0, 6.0 if j % 4 else 1e-7, 2)
             progress = float(rng.uniform(-5.0, fast.total + 5.0))
@@ -134,7 +135,7 @@ def town(request):
 
 def test_lane_heading_is_lane_pose(town):
     net, _ = town
-    heading = _LaneHeading(net)
+    heading = LaneHeading(net)
     for lane in sorted(net.lane_shape):
         length = net.lane_length[lane]
         for pos in (-1.0, 0.0, 0.3 * length, 0.5 * length, 0.77 * length, length - 1e-9, length,
@@ -143,20 +144,19 @@ def test_lane_heading_is_lane_pose(town):
 
 
 def test_footprint_and_drivable_lookup_are_the_array_forms(town):
-    net, r = town
+    net, _ = town
+    area = drivable_area(net)
     rng = np.random.default_rng(11)
     pts = np.concatenate(list(net.lane_shape.values()))
     size = (4.9, 2.1)
     for _ in range(3000):
         x, y = pts[int(rng.integers(len(pts)))] + rng.normal(0.0, 2.5, 2)
         st = EgoState(float(x), float(y), float(rng.uniform(-math.pi, math.pi)))
-        corners = _corners(st, size)
-        assert [r.drivable_xy(float(cx), float(cy)) for cx, cy in corners] == r.drivable_at(corners).tolist()
-        assert _off_corners(st, size, r.count_off) == int((~r.drivable_at(corners)).sum())
-    far = r.x0 - 1e6
-    assert not r.drivable_xy(far, 0.0) and not r.drivable_xy(float("nan"), 0.0)
-    assert not r.drivable_xy(float("inf"), 0.0)
-    assert r.count_off([(far, 0.0), (float("nan"), 1.0), (float("-inf"), 0.0)]) == 3
+        corners = footprint_corners(st, size)
+        seen: list = []
+        assert off_corners(st, size, lambda p, seen=seen: seen.extend(p) or 0) == 0
+        assert np.array_equal(np.array(seen), corners)  # the same corners, float for float
+        assert off_corners(st, size, area.count_off) == int((~area.contains_xy(corners)).sum())
 
 
 def test_render_static_and_ego_layers_are_the_canvas_warp(town):

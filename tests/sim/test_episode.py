@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from icrsumo.agents.base import Action
 from icrsumo.agents.privileged import InstructionFollower, RouteOracle
 from icrsumo.agents.registry import make_agent
 from icrsumo.convert import ConvertOptions, convert_routes
@@ -17,9 +18,11 @@ from icrsumo.instructions.store import read_instruction_sets
 from icrsumo.logs import dumps_log
 from icrsumo.metrics import score_episode
 from icrsumo.resources import bundled_suites
-from icrsumo.runner import run_episode
 from icrsumo.scenario import find_scenarios, read_scenario
+from icrsumo.sim.episode import run_episode
 from icrsumo.types import TerminationClass
+
+pytestmark = pytest.mark.sumo
 
 
 class BlindOracle(RouteOracle):
@@ -218,23 +221,70 @@ class Swerve(RouteOracle):
 
 
 def test_leaving_the_drivable_area_is_a_static_collision_and_video(quiet, tmp_path):
-    from icrsumo.runner import RunOptions
+    from icrsumo.sim.callbacks import VideoRecorder
 
     sc, sets = _load(quiet, "tiny", "tiny_003")
     video = tmp_path / "ep.mp4"
-    log = run_episode(sc, sets[0], Swerve(), RunOptions(video=video))
+    log = run_episode(sc, sets[0], Swerve(), callbacks=[VideoRecorder(video)])
     assert any(e.kind == "collision_static" for e in log.events)
     assert any(i.kind == "collision_static" for i in score_episode(log).infractions)
     assert video.exists() or video.with_suffix(".avi").exists()
 
 
 def test_loop_timings_are_filled_and_change_nothing(quiet):
-    from icrsumo.runner import LoopTimings, RunOptions
+    from icrsumo.sim.callbacks import LoopTimer, LoopTimings
 
     sc, sets = _load(quiet, "tiny", "tiny_005")
     tm = LoopTimings()
-    timed = run_episode(sc, sets[0], RouteOracle(), RunOptions(timings=tm))
+    timed = run_episode(sc, sets[0], RouteOracle(), callbacks=[LoopTimer(tm)])
     plain = run_episode(sc, sets[0], RouteOracle())
     assert dumps_log(timed) == dumps_log(plain)
     assert tm.steps == len(plain.t) and tm.frames == tm.acts == (tm.steps + 1) // 2
     assert 0 < tm.render_s < tm.loop_s and 0 < tm.act_s < tm.loop_s and tm.setup_s > 0
+
+
+def test_scores_do_not_depend_on_the_bev_raster(quiet):
+    """Infractions come from the network's geometry: another raster resolution and channel set
+    give the same log and scores (agents that do not drive from the raster)."""
+    from icrsumo.render import BevSpec
+    from icrsumo.sim.episode import RunOptions
+
+    sc, sets = _load(quiet, "tiny", "tiny_003")
+    coarse = RunOptions(bev=BevSpec(m_per_px=1.0, height=64, width=96, behind_m=8.0,
+                                    channels=("vehicles", "drivable")))
+    kinds = set()
+    for agent in (Swerve, BlindOracle):
+        plain = run_episode(sc, sets[0], agent())
+        other = run_episode(sc, sets[0], agent(), coarse)
+        assert dumps_log(plain) == dumps_log(other)
+        assert score_episode(plain) == score_episode(other)
+        kinds |= {e.kind for e in plain.events}
+    assert "collision_static" in kinds  # the roadside rule is exercised
+
+
+class _Peek(RouteOracle):
+    """Records whether its World view carries the route."""
+
+    name = "peek"
+
+    def __init__(self, needs_route: bool) -> None:
+        super().__init__()
+        self.needs_route = needs_route
+        self.seen: set[bool] = set()
+
+    def act(self, obs):
+        self.seen.add(obs.world.route is not None)
+        if obs.world.route is None:
+            from icrsumo.dynamics import Control
+
+            return Action(control=Control(brake=1.0))
+        return super().act(obs)
+
+
+def test_only_agents_that_declare_it_get_the_route(quiet):
+    sc, sets = _load(quiet, "tiny", "tiny_003")
+    with_route, without = _Peek(True), _Peek(False)
+    run_episode(sc, sets[0], with_route)
+    log = run_episode(sc, sets[0], without)
+    assert with_route.seen == {True} and without.seen == {False} and log.t
+    assert RouteOracle.needs_route and not getattr(InstructionFollower, "needs_route", False)

@@ -1,0 +1,128 @@
+"""The local backend: worker processes on this machine (one SUMO each), fed one job at a time
+over a pipe, with a watchdog in the parent that kills and replaces a worker whose agent call
+overruns the timeout (:class:`~icrsumo.evaluation.watch.SlotWatch`) or that dies."""
+
+from __future__ import annotations
+
+import multiprocessing
+import multiprocessing.connection
+import signal
+import time
+from collections.abc import Iterator
+from typing import Any
+
+from ...agents.watch import SlotWatch, Unwatched, overran, timeout_message
+from ...vocab import ErrorKind
+from ..execute import EpisodeWorker, Outcome
+from ..plan import Job
+
+
+def _worker_main(conn: multiprocessing.connection.Connection, slot: Any) -> None:
+    """A pool worker: run the jobs it is sent, one at a time, until it is sent None."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    worker = EpisodeWorker(SlotWatch(slot))
+    try:
+        while True:
+            try:
+                job = conn.recv()
+            except (EOFError, OSError):
+                return
+            if job is None:
+                return
+            conn.send(worker.run(job))
+    finally:
+        worker.close()
+
+
+class _Process:
+    """One worker process, its pipe, its watch slot and the job it runs."""
+
+    def __init__(self, ctx: Any) -> None:
+        self.slot = ctx.Value("d", 0.0, lock=False)
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_worker_main, args=(child, self.slot), daemon=True)
+        self.proc.start()
+        child.close()
+        self.job: Job | None = None
+
+    def send(self, job: Job) -> None:
+        self.job = job
+        self.slot.value = 0.0
+        self.conn.send(job)
+
+    def stop(self, kill: bool = False) -> None:
+        if not kill:
+            try:
+                self.conn.send(None)
+                self.proc.join(timeout=10)
+            except (OSError, ValueError):
+                pass
+        if self.proc.is_alive():
+            self.proc.kill()
+            self.proc.join()
+        self.conn.close()
+
+
+def run_local(jobs: list[Job], workers: int, timeout: float | None = None) -> Iterator[tuple[Job, Outcome]]:
+    """Run ``jobs`` in ``workers`` processes, yielding each job with its outcome as it ends; a
+    worker whose agent call overruns ``timeout`` s (or that dies) is replaced and its episode
+    reported as timed out (or crashed). ``workers == 1`` without a timeout runs in this
+    process."""
+    if workers == 1 and timeout is None:
+        worker = EpisodeWorker(Unwatched())
+        try:
+            for job in jobs:
+                yield job, worker.run(job)
+        finally:
+            worker.close()
+        return
+    if not jobs:
+        return
+    ctx = multiprocessing.get_context()
+    it = iter(jobs)
+    busy: dict = {}
+    pool: list[_Process] = []
+
+    def feed(w: _Process) -> None:
+        job = next(it, None)
+        if job is not None:
+            w.send(job)
+            busy[w.conn] = w
+
+    def replace(w: _Process) -> _Process:
+        w.stop(kill=True)
+        pool[pool.index(w)] = new = _Process(ctx)
+        return new
+
+    try:
+        for _ in range(min(workers, len(jobs))):
+            pool.append(_Process(ctx))
+            feed(pool[-1])
+        while busy:
+            for conn in multiprocessing.connection.wait(list(busy), timeout=0.2):
+                w = busy.pop(conn)
+                job, w.job = w.job, None
+                try:
+                    outcome = conn.recv()
+                except (EOFError, OSError):
+                    w.proc.join(timeout=5)
+                    outcome = Outcome.failure(
+                        ErrorKind.WORKER_DIED, f"WorkerDied: the worker process died (exit code "
+                                               f"{w.proc.exitcode}) while running this episode")
+                    w = replace(w)
+                yield job, outcome
+                feed(w)
+            if timeout is not None:
+                now = time.monotonic()
+                for conn, w in list(busy.items()):
+                    if overran(w.slot, timeout, now):
+                        busy.pop(conn)
+                        job = w.job
+                        w = replace(w)
+                        yield job, Outcome.failure(
+                            ErrorKind.AGENT_TIMEOUT, f"AgentTimeout: {timeout_message(timeout)} "
+                                                     f"(its worker process was stopped)")
+                        feed(w)
+    finally:
+        for w in pool:
+            w.stop(kill=w.conn in busy)

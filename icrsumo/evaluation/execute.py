@@ -1,0 +1,143 @@
+"""Running one episode job in a worker: the agent's calls guarded by a
+:class:`~icrsumo.evaluation.watch.CallWatch`, the episode scored, and a typed :class:`Outcome`
+returned (never an exception): done with its record and log, crashed with an
+:class:`~icrsumo.vocab.ErrorKind` and a one-line message, or timed out."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..agents.base import Agent, AgentTimeout
+from ..agents.registry import agent_factory
+from ..agents.watch import CallWatch, Unwatched
+from ..errors import describe
+from ..types import EpisodeRecord
+from ..vocab import EpisodeStatus, ErrorKind, OutcomeStatus
+from .plan import Job
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What running one job gave. ``status`` done: ``record`` (attempts 1) and ``log_json``;
+    crashed or timed_out: ``error_kind`` and ``message`` (one line, e.g.
+    ``RuntimeError: agent exploded at my_agent.py:35``)."""
+
+    status: OutcomeStatus
+    record: EpisodeRecord | None = None
+    log_json: str = ""
+    error_kind: ErrorKind | None = None
+    message: str = ""
+
+    @classmethod
+    def finished(cls, record: EpisodeRecord, log_json: str) -> Outcome:
+        return cls(OutcomeStatus.DONE, record, log_json)
+
+    @classmethod
+    def failure(cls, kind: ErrorKind, message: str) -> Outcome:
+        """A failed run: timed out for :attr:`ErrorKind.AGENT_TIMEOUT`, else crashed."""
+        status = OutcomeStatus.TIMED_OUT if kind is ErrorKind.AGENT_TIMEOUT else OutcomeStatus.CRASHED
+        return cls(status, error_kind=kind, message=message)
+
+    @classmethod
+    def of_error(cls, err: BaseException) -> Outcome:
+        """The outcome of an exception raised while running the episode."""
+        kind = ErrorKind.AGENT_TIMEOUT if isinstance(err, AgentTimeout) else ErrorKind.ERROR
+        return cls.failure(kind, describe(err))
+
+
+class WatchedAgent:
+    """An agent whose ``reset`` / ``act`` calls run under ``watch``. ``name``, ``privileged``
+    and ``needs_route`` are the agent's (so the episode is the same); anything else is read
+    from the agent."""
+
+    def __init__(self, agent: Agent, watch: CallWatch) -> None:
+        self._agent, self._watch = agent, watch
+        self.name = getattr(agent, "name", type(agent).__name__)
+        self.privileged = getattr(agent, "privileged", False)
+        self.needs_route = getattr(agent, "needs_route", False)
+
+    def __getattr__(self, attr: str) -> Any:  # anything else is the agent's own
+        return getattr(self.__dict__["_agent"], attr)
+
+    def reset(self, info):
+        return self._watch.call(self._agent.reset, info)
+
+    def act(self, obs):
+        return self._watch.call(self._agent.act, obs)
+
+    def close(self) -> None:
+        """The agent's optional ``close()`` (best effort: its errors are ignored)."""
+        if callable(getattr(self._agent, "close", None)):
+            with contextlib.suppress(Exception):
+                self._agent.close()
+
+
+class EpisodeWorker:
+    """Runs jobs one at a time in one process, with its agents' calls under ``watch``. Keeps
+    the agent factory of each spec (or each job factory) it has met, so user code is imported
+    and remote agents are asked for their name once per process; :meth:`close` closes the
+    factories that hold connections."""
+
+    def __init__(self, watch: CallWatch | None = None) -> None:
+        self.watch: CallWatch = watch if watch is not None else Unwatched()
+        self.factories: dict[Hashable, Callable[[], Agent]] = {}
+
+    def factory(self, job: Job) -> Callable[[], Agent]:
+        ref: Hashable = job.factory if job.factory is not None else (job.agent_spec, job.device)
+        factory = self.factories.get(ref)
+        if factory is None:
+            factory = job.factory if job.factory is not None else agent_factory(job.agent_spec, job.device)
+            self.factories[ref] = factory
+        return factory
+
+    def run(self, job: Job) -> Outcome:
+        """Run one episode and score it; every failure becomes an Outcome."""
+        from ..instructions.store import read_instruction_sets
+        from ..logs import dumps_log
+        from ..metrics import score_episode
+        from ..scenario import read_scenario
+        from ..sim.episode import run_episode
+
+        try:
+            factory = self.factory(job)
+            sc = read_scenario(Path(job.scenario))
+            sets = [s for s in read_instruction_sets(Path(job.instructions))
+                    if s.family == job.family and s.k == job.k]
+            agent = WatchedAgent(factory(), self.watch)
+            try:
+                log = run_episode(sc, sets[0], agent)
+            finally:
+                agent.close()  # the optional close() hook: e.g. a remote agent ends its session
+            r = score_episode(log)
+            rec = EpisodeRecord(
+                agent=job.agent, route_id=job.route_id, family=job.family, k=job.k, seed=job.seed,
+                status=EpisodeStatus.DONE, ds=r.ds, rc=r.rc, is_=r.is_, termination=r.termination,
+                termination_class=r.termination_class.value,
+                infractions=tuple((i.kind, i.factor) for i in r.infractions),
+                length=round(sc.length, 2), duration=r.duration, message=log.message,
+            )
+            return Outcome.finished(rec, dumps_log(log))
+        except Exception as err:  # an agent or the simulator failed: the caller retries / records
+            return Outcome.of_error(err)
+
+    def close(self) -> None:
+        """Close the factories that hold connections: those whose type has a ``close`` method
+        (best effort)."""
+        for factory in self.factories.values():
+            if callable(getattr(type(factory), "close", None)):
+                with contextlib.suppress(Exception):
+                    factory.close()
+        self.factories.clear()
+
+
+def run_job(job: Job, watch: CallWatch | None = None) -> Outcome:
+    """Run one job in a fresh :class:`EpisodeWorker` (for one-off runs and tests)."""
+    worker = EpisodeWorker(watch)
+    try:
+        return worker.run(job)
+    finally:
+        worker.close()

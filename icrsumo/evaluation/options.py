@@ -1,0 +1,79 @@
+"""The options of one evaluation and their validation (pure: no user code is imported here;
+agent specs are resolved by the orchestration, :mod:`icrsumo.evaluation.run`)."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..agents.registry import DEFAULT_AGENT
+from ..errors import InputError
+from ..instructions.families import FAMILIES
+from ..resources import bundled_suites
+
+#: execution backends: a local process pool, or Ray
+BACKENDS = ("local", "ray")
+#: seconds an agent's reset / act call may take by default (--agent-timeout)
+AGENT_TIMEOUT = 60.0
+
+
+@dataclass(frozen=True)
+class EvalOptions:
+    """One evaluation. ``routes``: a subset of route ids (None: all). ``agent_timeout``: s an
+    agent's reset / act call may take (None: no limit, and ``workers=1`` runs in-process)."""
+
+    out: Path
+    suite: str = "tiny"
+    agents: tuple[str, ...] = (DEFAULT_AGENT,)
+    families: tuple[str, ...] = FAMILIES
+    k: int = 8
+    seed: int = 2026
+    routes: tuple[str, ...] | None = None
+    workers: int = field(default_factory=lambda: os.cpu_count() or 1)
+    backend: str = "local"
+    address: str | None = None
+    traffic: str = "normal"
+    quiet: bool = False
+    rollout_route: str | None = None
+    agent_timeout: float | None = AGENT_TIMEOUT
+    #: device of one batched inference process per non-privileged agent (None: every worker
+    #: runs its own agent), e.g. "cuda"; ``max_batch``: observations per forward pass
+    batch_inference: str | None = None
+    max_batch: int = 32
+    #: inference processes per agent with ``batch_inference`` (each worker uses one)
+    inference_processes: int = 1
+    #: device of the learned agents that the episode workers run themselves (None: their
+    #: default, cpu); with ``batch_inference`` the inference processes use that device instead
+    agent_device: str | None = None
+
+    def check(self) -> None:
+        """InputErrors for bad values (agent specs are checked when they are resolved)."""
+        bad = [f for f in self.families if f not in FAMILIES]
+        if bad or not self.families:
+            raise InputError("--family", bad[0] if bad else "", "unknown family",
+                             f"use {', '.join(FAMILIES)}")
+        if self.backend not in BACKENDS:
+            raise InputError("--backend", self.backend, "unknown backend", "use local or ray")
+        if not 1 <= self.k <= 64:
+            raise InputError("--k", str(self.k), "out of range", "use 1 to 64 (default 8)")
+        if self.workers < 1:
+            raise InputError("--workers", str(self.workers), "must be at least 1", "give a positive count")
+        if self.agent_timeout is not None and not self.agent_timeout > 0:
+            raise InputError("--agent-timeout", str(self.agent_timeout), "must be positive",
+                             "give seconds per agent call (0 on the command line: no limit)")
+        if self.batch_inference is not None:
+            if self.backend != "local":
+                raise InputError("--batch-inference", self.batch_inference, "works with the local backend "
+                                 "only (its workers reach the inference process through a Unix socket)",
+                                 "use --backend local")
+            if self.max_batch < 1:
+                raise InputError("--max-batch", str(self.max_batch), "must be at least 1",
+                                 "give a positive count")
+            if self.inference_processes < 1:
+                raise InputError("--inference-processes", str(self.inference_processes),
+                                 "must be at least 1", "give a positive count")
+        p = Path(self.suite)
+        if self.suite not in bundled_suites() and not p.is_file() and not (p / "index.json").is_file():
+            raise InputError("--suite", self.suite, "unknown suite",
+                             "use tiny, short, long, a route XML file or a convert-routes folder")

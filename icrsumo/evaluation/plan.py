@@ -1,0 +1,118 @@
+"""Planning: the out folder's configuration, the suite prepared into it (convert + generate),
+and the episode jobs of the paired protocol in their fixed order."""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..agents.base import Agent
+from ..convert import ConvertOptions, convert_routes, safe_name
+from ..errors import InputError
+from ..fsio import dumps_json, write_atomic
+from ..instructions.families import FAMILIES
+from ..instructions.generate import GenerateOptions, generate
+from ..resources import bundled_suites
+from ..scenario import find_scenarios, read_scenario
+from .options import EvalOptions
+
+
+@dataclass(frozen=True)
+class Job:
+    """One episode to run: its store key, the files it needs, and how the worker gets the agent:
+    ``agent_spec`` resolved in the worker (its learned agents on ``device``, None: cpu), or
+    ``factory``, a picklable agent factory that replaces the spec (batched inference)."""
+
+    agent_spec: str
+    agent: str
+    route_id: str
+    family: str
+    k: int
+    seed: int
+    scenario: str
+    instructions: str
+    device: str | None = None
+    factory: Callable[[], Agent] | None = field(default=None, compare=False)
+
+    @property
+    def key(self) -> tuple[str, str, str, int, int]:
+        return (self.agent, self.route_id, self.family, self.k, self.seed)
+
+
+@dataclass(frozen=True)
+class PreparedSuite:
+    """A suite ready to run in an out folder: ``scenarios`` (the folder of converted
+    scenarios), ``instructions`` (OUT/instructions), the route ids with instructions
+    (``routes``) and the lines of what was skipped."""
+
+    scenarios: Path
+    instructions: Path
+    routes: tuple[str, ...]
+    skipped: tuple[str, ...] = ()
+
+
+def check_config(out: Path, opts: EvalOptions) -> dict:
+    """The configuration stored in OUT/config.json; an InputError when OUT holds another one."""
+    config = {"suite": opts.suite, "seed": opts.seed, "k": opts.k, "traffic": opts.traffic}
+    path = out / "config.json"
+    if path.is_file():
+        old = json.loads(path.read_text(encoding="utf-8"))
+        diff = [k for k in config if old.get(k) != config[k]]
+        if diff:
+            shown = ", ".join(f"{k}={old.get(k)!r} (now {config[k]!r})" for k in diff)
+            raise InputError(out, "config.json", f"holds results of a different configuration: {shown}",
+                             "use another --out folder, or the same options")
+    return config
+
+
+def _resolve_suite(opts: EvalOptions, out: Path) -> tuple[Path, list[str]]:
+    """The folder of converted scenarios for ``opts.suite`` (converting into OUT/scenarios)."""
+    p = Path(opts.suite)
+    if p.is_dir() and (p / "index.json").is_file():
+        return p, []
+    routes = bundled_suites().get(opts.suite, p)
+    target = out / "scenarios"
+    report = convert_routes(routes, target, ConvertOptions(traffic=opts.traffic, workers=opts.workers))
+    return target, list(report.failures)
+
+
+def prepare_suite(opts: EvalOptions) -> PreparedSuite:
+    """Check and write OUT/config.json, convert the suite into OUT/scenarios (a convert-routes
+    folder is used as it is) and generate the instructions of every family into
+    OUT/instructions (both reused when present). Skipped routes are named on stderr."""
+    out = Path(opts.out)
+    config = check_config(out, opts)
+    out.mkdir(parents=True, exist_ok=True)
+    write_atomic(out / "config.json", dumps_json(config))
+    scenarios, skipped = _resolve_suite(opts, out)
+    for line in skipped:
+        print(f"icrsumo: skipped: {line}", file=sys.stderr)
+    instr_dir = out / "instructions"
+    written, failures = generate(scenarios, instr_dir, GenerateOptions(
+        families=FAMILIES, k=opts.k, seed=opts.seed, workers=1))
+    for line in failures:
+        print(f"icrsumo: skipped: {line}", file=sys.stderr)
+    return PreparedSuite(scenarios, instr_dir, tuple(written), tuple(skipped) + tuple(failures))
+
+
+def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mapping[str, str]) -> list[Job]:
+    """Every episode of the protocol, in a fixed order (agent, route, family, k); ``names``:
+    agent spec -> the name its results are stored under."""
+    scs = [(d, read_scenario(d)) for d in find_scenarios(scenarios)]
+    if opts.routes:
+        missing = sorted(set(opts.routes) - {sc.route_id for _, sc in scs})
+        if missing:
+            raise InputError("--routes", missing[0], "no such route in the suite", "check the route ids")
+        scs = [(d, sc) for d, sc in scs if sc.route_id in set(opts.routes)]
+    sets = [("baseline", 0)] + [(f, k) for f in opts.families for k in range(opts.k)]
+    jobs = []
+    for spec in opts.agents:
+        for d, sc in scs:
+            instr = str(instr_dir / f"{safe_name(sc.route_id)}.json")
+            for fam, k in sets:
+                jobs.append(Job(spec, names[spec], sc.route_id, fam, k, opts.seed, str(d), instr,
+                                device=opts.agent_device))
+    return jobs

@@ -1,0 +1,276 @@
+"""The simulator backend: the only module of the package that imports libsumo.
+
+:class:`SumoSession` is a context-managed, in-process SUMO run of a scenario; libsumo runs one
+simulation per process, so a session must be closed (the context manager always does, also on
+error) before the next one starts. :class:`SumoBackend` is what the closed loop uses: start the
+scenario, insert the ego, place it at a pose, step, and :meth:`SumoBackend.read` SUMO's state
+as a frozen :class:`~icrsumo.sim.frame.SimFrame`. Every libsumo error surfaces as a
+:class:`SimulatorError` whose ``message`` is ``"TraCIException: ..."``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+
+import numpy as np
+
+from ..resources import sumo_home
+from ..scenario import Scenario
+from .frame import Contact, SimFrame
+
+EGO_ID = "ego"
+#: radius (m) of the context subscription around the ego (nearby vehicles and persons)
+CONTEXT_RADIUS = 60.0
+
+_active = False  # libsumo's own state is per process: at most one session is open
+
+
+def _libsumo():
+    sumo_home()  # sets SUMO_HOME before libsumo looks for it
+    import libsumo
+
+    return libsumo
+
+
+def sumo_constants():
+    """libsumo's constants module (variable ids for subscriptions)."""
+    return _libsumo().constants
+
+
+class SimulatorError(RuntimeError):
+    """SUMO failed (libsumo raised); ``message`` is ``"<libsumo error type>: <its text>"``."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.message = message
+
+
+def _is_libsumo_error(err: BaseException) -> bool:
+    return type(err).__module__.startswith("libsumo") or "TraCI" in type(err).__name__
+
+
+@contextlib.contextmanager
+def _translated():
+    """Turn libsumo's exceptions into :class:`SimulatorError`; others pass unchanged."""
+    try:
+        yield
+    except SimulatorError:
+        raise
+    except Exception as err:
+        if _is_libsumo_error(err):
+            raise SimulatorError(f"{type(err).__name__}: {err}") from err
+        raise
+
+
+class SumoSession:
+    """One SUMO run of a scenario: ``with SumoSession(sc) as s: s.step()``.
+
+    Time is in s; the step length comes from the scenario's ``.sumocfg``.
+    """
+
+    def __init__(self, scenario: Scenario, extra_args: tuple[str, ...] = ()) -> None:
+        self.scenario = scenario
+        self.extra_args = tuple(extra_args)
+        self.ls = None
+
+    def __enter__(self) -> SumoSession:
+        global _active
+        if _active:
+            raise RuntimeError("libsumo runs one simulation per process; close the other first")
+        ls = _libsumo()
+        ls.start(["sumo", "-c", str(self.scenario.sumocfg), "--seed", str(self.scenario.seed),
+                  "--no-step-log", "true", *self.extra_args])
+        _active = True
+        self.ls = ls
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        global _active
+        if self.ls is not None:
+            try:
+                self.ls.close()
+            finally:
+                self.ls = None
+                _active = False
+
+    @property
+    def time(self) -> float:
+        """Current simulation time (s)."""
+        return float(self.ls.simulation.getTime())
+
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` simulation steps."""
+        for _ in range(n):
+            self.ls.simulationStep()
+
+    def run_until(self, t: float) -> None:
+        """Step until the simulation time reaches ``t`` (s)."""
+        dt = float(self.ls.simulation.getDeltaT())
+        while self.time + 1e-9 < t:
+            self.ls.simulationStep()
+            if dt <= 0:
+                break
+
+    def insert_ego(self, max_wait: float = 30.0) -> bool:
+        """Insert the ego at its start lane position on ``ego_route`` at the current time and
+        step until SUMO has placed it (insertion waits while the spot is occupied, at most
+        ``max_wait`` s). Returns whether the ego is in the simulation."""
+        sc = self.scenario
+        lane_index = sc.start_lane.rsplit("_", 1)[1]
+        self.ls.vehicle.add(
+            EGO_ID, "ego_route", typeID="ego", depart="now", departLane=lane_index,
+            departPos=f"{sc.start_pos:.2f}", departSpeed="0",
+        )
+        deadline = self.time + max_wait
+        while self.time < deadline:
+            self.ls.simulationStep()
+            if EGO_ID in self.ls.vehicle.getIDList():
+                return True
+        return False
+
+    def ego_state(self) -> dict:
+        """Ego road id, lane id, lane position (m), x, y (m, front bumper), speed (m/s)."""
+        v = self.ls.vehicle
+        x, y = v.getPosition(EGO_ID)
+        return {"road": v.getRoadID(EGO_ID), "lane": v.getLaneID(EGO_ID),
+                "pos": v.getLanePosition(EGO_ID), "x": x, "y": y, "speed": v.getSpeed(EGO_ID),
+                "route": tuple(v.getRoute(EGO_ID))}
+
+
+class SumoBackend:
+    """The closed loop's view of SUMO for one scenario (see the module docstring).
+
+    ``start()`` starts SUMO, ``run_until(t)`` runs the traffic warm-up up to the ego's departure;
+    ``insert_ego(x, y, yaw)`` adds the externally driven ego at the scenario's start (pose of
+    its front bumper, m and rad) and takes one step; ``place_ego(x, y, yaw)`` moves it there
+    for the next ``step()``; ``read(surroundings)`` returns the :class:`SimFrame` of the
+    current step (the nearby actors only when ``surroundings``). ``close()`` is idempotent.
+    """
+
+    def __init__(self, scenario: Scenario, context_radius: float = CONTEXT_RADIUS) -> None:
+        self.scenario = scenario
+        self.context_radius = context_radius
+        self._session: SumoSession | None = None
+        self.tls_ids: tuple[str, ...] = ()
+
+    def __enter__(self) -> SumoBackend:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._session is not None:
+            session, self._session = self._session, None
+            session.close()
+
+    @property
+    def time(self) -> float:
+        """Current simulation time (s)."""
+        with _translated():
+            return self._session.time
+
+    def start(self) -> None:
+        """Start SUMO on the scenario (its config and seed)."""
+        with _translated():
+            self._session = SumoSession(self.scenario).__enter__()
+            self._tc = tc = sumo_constants()
+            self._lane_var, self._pos_var = tc.VAR_LANE_ID, tc.VAR_LANEPOSITION
+            self._tl_var = tc.TL_RED_YELLOW_GREEN_STATE
+
+    def run_until(self, t: float) -> None:
+        """Step the traffic until simulation time ``t`` (s): the warm-up before the ego departs."""
+        with _translated():
+            self._session.run_until(t)
+
+    def insert_ego(self, x: float, y: float, yaw: float) -> None:
+        """Add the ego on the scenario's start lane, place its front bumper at (x, y) m heading
+        ``yaw`` rad, take one step and subscribe to what :meth:`read` needs."""
+        sc, tc = self.scenario, self._tc
+        with _translated():
+            ls = self._session.ls
+            lane_index = sc.start_lane.rsplit("_", 1)[1]
+            ls.vehicle.add(EGO_ID, "ego_route", typeID="ego", depart="now", departLane=lane_index,
+                           departPos=f"{sc.start_pos:.2f}", departSpeed="0")
+            ls.vehicle.setSpeedMode(EGO_ID, 0)
+            ls.vehicle.setLaneChangeMode(EGO_ID, 0)
+            ls.vehicle.moveToXY(EGO_ID, "", -1, x, y, 90.0 - math.degrees(yaw), 2)
+            ls.simulationStep()
+            ls.vehicle.subscribe(EGO_ID, [tc.VAR_LANE_ID, tc.VAR_LANEPOSITION])
+            ls.vehicle.subscribeContext(EGO_ID, tc.CMD_GET_VEHICLE_VARIABLE, self.context_radius,
+                                        [tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_LENGTH, tc.VAR_WIDTH])
+            ls.vehicle.subscribeContext(EGO_ID, tc.CMD_GET_PERSON_VARIABLE, self.context_radius,
+                                        [tc.VAR_POSITION])
+            self.tls_ids = tuple(ls.trafficlight.getIDList())
+            for tl in self.tls_ids:
+                ls.trafficlight.subscribe(tl, [tc.TL_RED_YELLOW_GREEN_STATE])
+
+    def place_ego(self, x: float, y: float, yaw: float) -> None:
+        """Move the ego's front bumper to (x, y) m heading ``yaw`` rad (SUMO keeps it on the
+        nearest lane, or off every lane when none is near: ``keepRoute=2``)."""
+        with _translated():
+            self._session.ls.vehicle.moveToXY(EGO_ID, "", -1, x, y, 90.0 - math.degrees(yaw), 2)
+
+    def step(self) -> None:
+        with _translated():
+            self._session.ls.simulationStep()
+
+    def read(self, surroundings: bool = False) -> SimFrame:
+        """SUMO's state at the current step (see :class:`SimFrame`)."""
+        with _translated():
+            ls = self._session.ls
+            t = float(ls.simulation.getTime())
+            sub = ls.vehicle.getSubscriptionResults(EGO_ID)
+            # results exist only while the ego does (after a moveToXY it is also in getIDList())
+            if not sub and EGO_ID not in ls.vehicle.getIDList():
+                return SimFrame(t=t, ego_present=False)
+            contacts = ()
+            colls = ls.simulation.getCollisions()
+            if colls:
+                persons = set(ls.person.getIDList())
+                found = []
+                for c in colls:
+                    if c.collider == EGO_ID:
+                        other = c.victim
+                    elif c.victim == EGO_ID:
+                        other = c.collider
+                    else:
+                        continue
+                    found.append(Contact(other, other in persons))
+                contacts = tuple(found)
+            teleports = ls.simulation.getStartingTeleportIDList()
+            teleports = tuple(v for v in teleports if v != EGO_ID) if teleports else ()
+            tl_all, tl_var = ls.trafficlight.getAllSubscriptionResults(), self._tl_var
+            tl_states = {tl: tl_all[tl][tl_var] for tl in self.tls_ids}
+            vehicles = pedestrians = None
+            if surroundings:
+                vehicles, pedestrians = self._surroundings(ls)
+            return SimFrame(t=t, ego_present=True, lane=sub.get(self._lane_var, ""),
+                            lane_pos=float(sub.get(self._pos_var, 0.0)), contacts=contacts,
+                            any_collision=bool(colls),
+                            teleports=teleports, tl_states=tl_states, vehicles=vehicles,
+                            pedestrians=pedestrians)
+
+    def _surroundings(self, ls) -> tuple[np.ndarray, np.ndarray]:
+        """Vehicles (N, 5: centre x, y, yaw, length, width) and pedestrians (M, 2) within the
+        context radius (SUMO reports a vehicle's front bumper: it is moved to the centre)."""
+        tc = self._tc
+        ctx = ls.vehicle.getContextSubscriptionResults(EGO_ID) or {}
+        rows, peds = [], []
+        p_var, a_var, l_var, w_var = tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_LENGTH, tc.VAR_WIDTH
+        cos, sin, radians = math.cos, math.sin, math.radians
+        for vid, v in ctx.items():
+            if a_var in v:
+                if vid == EGO_ID:
+                    continue
+                yaw = radians(90.0 - v[a_var])
+                ln = v[l_var]
+                fx, fy = v[p_var]
+                rows.append((fx - 0.5 * ln * cos(yaw), fy - 0.5 * ln * sin(yaw), yaw, ln, v[w_var]))
+            else:
+                peds.append(v[p_var])
+        return np.array(rows, dtype=float).reshape(-1, 2 + 3), np.array(peds, dtype=float).reshape(-1, 2)

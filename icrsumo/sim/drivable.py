@@ -1,0 +1,129 @@
+"""The drivable area of a road network as exact polygons (shapely), for the roadside check.
+
+A point is drivable when it lies on a car lane or on a junction's carriageway:
+
+* every lane a passenger car may use (normal and junction-internal lanes): its centre line
+  widened by half the lane width to each side, flat at its ends, mitred at its bends (mitre
+  limit 2, as the BEV raster draws lanes);
+* every junction a car lane meets: the junction's own outline (netconvert's node shape),
+  minus its walking areas (the pavement corners of junctions with sidewalks). Crossings stay
+  drivable: they are painted on the carriageway.
+
+The test is a point-in-polygon predicate on prepared geometry (boundary points count as
+drivable), independent of any raster resolution or channel layout.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from functools import lru_cache
+
+import numpy as np
+import shapely
+from shapely.geometry import LineString, Polygon
+
+from ..networks import RoadNet
+
+#: mitre limit of the lane outlines (a bend's outer corner reaches at most 2 half-widths out)
+MITRE_LIMIT = 2.0
+
+
+#: side (m) of the cells that memoise the test: a cell wholly inside or wholly outside the
+#: area answers for every point in it; only points in cells the boundary crosses are tested
+CELL_M = 0.5
+#: the cells are tested grown by this much (m), so float rounding of a point's cell index
+#: cannot put it outside the box that was tested
+_CELL_PAD = 1e-6
+
+
+def _polygonal(geom):
+    """The polygons of ``geom`` (make_valid and unions may add stray lines and points)."""
+    parts = [g for g in shapely.get_parts(geom) if g.geom_type in ("Polygon", "MultiPolygon")]
+    return shapely.union_all(parts) if parts else Polygon()
+
+
+class DrivableArea:
+    """The drivable area of one network (see the module docstring); ``geometry`` is a shapely
+    (Multi)Polygon in SUMO coordinates (m). Answers are exact point-in-polygon results; cells
+    of :data:`CELL_M` that lie wholly inside or outside are remembered, so most points cost a
+    dictionary lookup."""
+
+    def __init__(self, geometry) -> None:
+        self.geometry = geometry
+        shapely.prepare(self.geometry)
+        self._cells: dict[tuple[int, int], int] = {}  # 0 outside, 1 inside, 2 crossed by the boundary
+
+    def _cell(self, key: tuple[int, int]) -> int:
+        x0, y0 = key[0] * CELL_M - _CELL_PAD, key[1] * CELL_M - _CELL_PAD
+        box = shapely.box(x0, y0, x0 + CELL_M + 2 * _CELL_PAD, y0 + CELL_M + 2 * _CELL_PAD)
+        if shapely.contains(self.geometry, box):
+            got = 1
+        elif not shapely.intersects(self.geometry, box):
+            got = 0
+        else:
+            got = 2
+        self._cells[key] = got
+        return got
+
+    @classmethod
+    def from_net(cls, net: RoadNet) -> DrivableArea:
+        sn = net.sumolib_net
+        lanes = []
+        for lid in sorted(net.lane_shape):
+            shape = net.lane_shape[lid]
+            if len(shape) < 2:
+                continue
+            half = float(sn.getLane(lid).getWidth()) / 2.0
+            lanes.append(LineString(shape).buffer(half, cap_style="flat", join_style="mitre",
+                                                  mitre_limit=MITRE_LIMIT))
+        car_nodes = set()
+        for eid in net.passenger_lanes:
+            edge = sn.getEdge(eid)
+            car_nodes.update((edge.getFromNode().getID(), edge.getToNode().getID()))
+        junctions = []
+        for nid in sorted(car_nodes):
+            shape = sn.getNode(nid).getShape()
+            if len(shape) >= 3:
+                junctions.append(_polygonal(shapely.make_valid(Polygon([p[:2] for p in shape]))))
+        walking = []
+        for edge in sn.getEdges(withInternal=True):
+            if edge.getFunction() == "walkingarea":
+                for lane in edge.getLanes():
+                    shape = lane.getShape()
+                    if len(shape) >= 3:
+                        walking.append(_polygonal(shapely.make_valid(Polygon([p[:2] for p in shape]))))
+        carriageway = shapely.difference(shapely.union_all(junctions), shapely.union_all(walking))
+        return cls(_polygonal(shapely.union_all([*lanes, carriageway])))
+
+    def contains(self, x: float, y: float) -> bool:
+        """Whether the point (x, y) m is drivable (a non-finite point is not)."""
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return False
+        key = (math.floor(x / CELL_M), math.floor(y / CELL_M))
+        got = self._cells.get(key)
+        if got is None:
+            got = self._cell(key)
+        if got != 2:
+            return got == 1
+        return bool(shapely.intersects_xy(self.geometry, x, y))
+
+    def contains_xy(self, xy: np.ndarray) -> np.ndarray:
+        """:meth:`contains` of points (N, 2) m, as an (N,) bool array (the plain predicate)."""
+        pts = np.asarray(xy, dtype=float).reshape(-1, 2)
+        out = np.zeros(len(pts), dtype=bool)
+        finite = np.isfinite(pts).all(axis=1)
+        if finite.any():
+            out[finite] = shapely.intersects_xy(self.geometry, pts[finite, 0], pts[finite, 1])
+        return out
+
+    def count_off(self, points: Iterable[tuple[float, float]]) -> int:
+        """How many of ``points`` ((x, y) m each) are off the drivable area."""
+        contains = self.contains
+        return sum(1 for x, y in points if not contains(x, y))
+
+
+@lru_cache(maxsize=16)
+def drivable_area(net: RoadNet) -> DrivableArea:
+    """The :class:`DrivableArea` of ``net`` (built once per network and process)."""
+    return DrivableArea.from_net(net)

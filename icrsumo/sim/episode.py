@@ -1,0 +1,317 @@
+"""The closed loop: scenario x instruction sequence x agent -> EpisodeLog. One loop for
+:func:`run_episode` (``icrsumo evaluate``, ``run-episode``, ``collect``), the Gymnasium
+environment and ``icrsumo check-agent``, all through :class:`Episode`.
+
+Per simulation step (``step_length`` s, 0.05 s = 20 Hz as the Leaderboard): the held action
+(controls, or ego-frame waypoints through the built-in controller) drives the kinematic
+bicycle model; the backend (:mod:`icrsumo.sim.backend`) places the ego in SUMO, steps and
+reads a :class:`~icrsumo.sim.frame.SimFrame`; the pure sensors (:mod:`icrsumo.sim.sensors`)
+turn it into events and readings; the step is recorded; the run-ending rules
+(:mod:`icrsumo.termination`) decide. Every ``control_every`` steps (default 2: 10 Hz) the
+agent gets an observation: BEV raster, speed, active instruction with ``[x]`` filled, notice
+(the surroundings are read, and the BEV rendered, only then). Instructions are issued online
+from the ego's progress: the active one is the last whose trigger (m) has been passed, the
+same triggers for every variant.
+
+Side effects (the log's columns, timings, video) are :mod:`callbacks <icrsumo.sim.callbacks>`.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+from ..agents.base import Action, Agent, EpisodeInfo, Observation, World, validate_action
+from ..control import WaypointController, WaypointPath
+from ..dynamics import Control, EgoState, VehicleParams, step
+from ..networks import load_net
+from ..render import BevRenderer, BevSpec
+from ..scenario import Scenario
+from ..termination import TerminationMonitor, route_timeout
+from ..types import EgoRoute, EpisodeLog, Event, InstructionSet, LanePos
+from ..vocab import EventKind, Termination
+from .backend import SimulatorError, SumoBackend
+from .callbacks import EpisodeCallback, LogRecorder, StepRecord
+from .drivable import drivable_area
+from .frame import SimFrame
+from .sensors import RouteProjection, Sensors, SensorState
+
+#: SUMO steps per agent decision (0.05 s x 2 = 10 Hz)
+CONTROL_EVERY = 2
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Episode options: agent rate (``control_every`` SUMO steps per agent decision) and the
+    BEV spec of the agent's raster (it changes what the agent sees, never the scoring)."""
+
+    control_every: int = CONTROL_EVERY
+    bev: BevSpec = BevSpec()
+
+
+@cache
+def _renderer(net_path: str, spec: BevSpec) -> BevRenderer:
+    return BevRenderer(load_net(Path(net_path)), spec)
+
+
+def ego_route(sc: Scenario) -> EgoRoute:
+    """The scenario's route as an :class:`EgoRoute` (what the route-oracle is handed)."""
+    m = sc.manifest
+    st, en = m["ego"]["start"], m["ego"]["end"]
+    return EgoRoute(
+        edges=tuple(m["ego"]["edges"]), lanes=tuple(tuple(x) for x in m["ego"]["lanes"]),
+        lane_path=tuple(m["ego"]["lane_path"]), start=LanePos(**st), end=LanePos(**en),
+        polyline=sc.polyline, length=sc.length, junctions=(), lane_changes=(),
+    )
+
+
+def _active(triggers: list[float], progress: float) -> int:
+    return bisect.bisect_right(triggers, progress + 1e-9) - 1
+
+
+class Episode:
+    """One closed-loop episode as a steppable object.
+
+    ``start()`` starts SUMO (warm-up, ego insertion) and returns the first
+    :class:`Observation`; ``step(action)`` checks the action (:func:`validate_action`), holds it
+    for ``control_every`` simulation steps and returns the next observation, or None once the
+    episode has ended (``termination`` says why). ``log(agent)`` is the :class:`EpisodeLog` so
+    far. ``close()`` (or leaving the ``with`` block) ends the SUMO session.
+    ``privileged``: observations carry the :class:`World` view (built-in agents only);
+    ``needs_route``: that view includes the route (the route-oracle only).
+    """
+
+    def __init__(self, scenario: Scenario, instructions: InstructionSet,
+                 options: RunOptions = RunOptions(), *, privileged: bool = False,  # noqa: B008
+                 needs_route: bool = False, callbacks: Sequence[EpisodeCallback] = ()) -> None:
+        self.scenario, self.instructions = scenario, instructions
+        self.options, self.privileged, self.needs_route = options, privileged, needs_route
+        self.net = net = load_net(scenario.net)
+        m = scenario.manifest
+        self.params = params = VehicleParams(length=float(m["ego"]["length"]), width=float(m["ego"]["width"]))
+        self.route = RouteProjection(np.asarray(scenario.polyline, dtype=float))
+        self.ego_route = ego_route(scenario)
+        self.sensors = Sensors(net, self.route, frozenset(self.ego_route.edges), drivable_area(net),
+                               (params.length, params.width))
+        self.renderer = _renderer(str(scenario.net), options.bev)
+        self.dt = float(m.get("step_length", 0.05))
+        self.instr = instructions.instructions
+        self.triggers = [i.trigger for i in self.instr]
+        self.texts = [i.rendered() for i in self.instr]
+        self.notices = instructions.notices
+        self.controller = WaypointController(params)
+        #: what the agent is told at reset
+        self.info = EpisodeInfo(route_id=scenario.route_id, town=scenario.town, net=str(scenario.net),
+                                step_length=self.dt, control_dt=self.dt * options.control_every,
+                                seed=scenario.seed)
+        #: the log's columns and events (always attached, first)
+        self.recorder = LogRecorder()
+        self.callbacks: tuple[EpisodeCallback, ...] = (self.recorder, *callbacks)
+        self.termination: Termination = Termination.SIM_ERROR
+        self.term_t = 0.0
+        self.message = ""
+        self.done = False
+        self.backend: SumoBackend | None = None
+        self.state: EgoState | None = None
+        self.sensor_state = SensorState()
+        self.frame: SimFrame | None = None
+        self.monitor: TerminationMonitor | None = None
+        self.action = Action(control=Control(brake=1.0))
+        self._path: WaypointPath | None = None
+        self.n_max = int((route_timeout(self.route.total) + 10.0) / self.dt) + 10
+        self.k_instr = -1
+        self.i = 0
+
+    # ------------------------------------------------------------------ lifecycle
+    def __enter__(self) -> Episode:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """End the SUMO session and the callbacks' outputs (idempotent)."""
+        if self.backend is None:
+            return
+        backend, self.backend = self.backend, None
+        try:
+            for cb in self.callbacks:
+                cb.on_close(self)
+        finally:
+            backend.close()
+
+    @property
+    def progress(self) -> float:
+        """Route progress (m): the furthest point of the route reached."""
+        return self.sensor_state.progress
+
+    def _finish(self, termination: Termination, t: float) -> None:
+        self.termination, self.term_t, self.done = termination, t, True
+        for cb in self.callbacks:
+            cb.on_end(self)
+
+    def _sim_error(self, err: SimulatorError) -> None:
+        try:
+            t = self.backend.time
+        except SimulatorError:  # SUMO is gone: the last time it reported
+            t = self.frame.t if self.frame is not None else 0.0
+        self.message = err.message
+        self.recorder.events.append(Event(EventKind.SIM_ERROR, t, 0.0, self.message))
+        self._finish(Termination.SIM_ERROR, t)
+
+    def start(self) -> Observation | None:
+        """Start SUMO, warm up, insert the ego; the first observation (None: ended at once)."""
+        for cb in self.callbacks:
+            cb.on_start(self)
+        self.backend = backend = SumoBackend(self.scenario)
+        backend.start()
+        scenario, params = self.scenario, self.params
+        try:
+            backend.run_until(scenario.ego_depart)
+            sx, sy, sh = scenario.start  # front bumper on the start lane
+            self.state = EgoState(sx - 0.5 * params.length * math.cos(sh),
+                                  sy - 0.5 * params.length * math.sin(sh), sh)
+            backend.insert_ego(sx, sy, sh)
+            self.monitor = TerminationMonitor(self.route.total, backend.time)
+            for cb in self.callbacks:
+                cb.on_ready(self)
+            return self._advance()
+        except SimulatorError as err:
+            self._sim_error(err)
+            return None
+
+    def step(self, action: Action) -> Observation | None:
+        """Hold ``action`` (checked: AgentError when invalid) until the next decision; its
+        observation, or None once the episode has ended."""
+        if self.done or self.backend is None:
+            raise RuntimeError("the episode has ended (or was never started)")
+        self.action = validate_action(action)
+        # the waypoints' polyline, prepared once for the steps the action is held
+        self._path = None if self.action.control is not None else WaypointPath(self.action.waypoints)
+        try:
+            self._apply()
+            return self._advance()
+        except SimulatorError as err:
+            self._sim_error(err)
+            return None
+
+    # ------------------------------------------------------------------ the loop
+    def _apply(self) -> None:
+        """The held action for one simulation step: controls, bicycle model, SUMO step."""
+        action, params, dt = self.action, self.params, self.dt
+        control = action.control if action.control is not None else self.controller.control(
+            self._path, self.state.speed, dt, action.target_speed)
+        state = self.state = step(self.state, control, dt, params)
+        fx, fy = state.front(params.length)
+        self.backend.place_ego(fx, fy, state.yaw)
+        self.backend.step()
+        self.i += 1
+
+    def _advance(self) -> Observation | None:
+        """Simulation steps until the next decision (its observation) or the end (None)."""
+        every = self.options.control_every
+        while True:
+            if self.i >= self.n_max:
+                self._finish(Termination.ROUTE_TIMEOUT, self.backend.time)
+                return None
+            observe = self.i % every == 0
+            if self._record_step(observe):
+                return None
+            if observe:
+                return self._observation()
+            self._apply()
+
+    def _record_step(self, observe: bool) -> bool:
+        """Read SUMO's frame, detect events, record the step; True when the episode ended."""
+        frame = self.frame = self.backend.read(surroundings=observe)
+        state, t = self.state, frame.t
+        if not frame.ego_present:  # SUMO teleported or removed the ego
+            self.recorder.events.append(Event(EventKind.EGO_TELEPORT, t, self.progress, "", state.x, state.y))
+            self._finish(Termination.STUCK, t)
+            return True
+        events, ss = self.sensors.detect(self.sensor_state, frame, state)
+        self.sensor_state = ss
+        k = self.k_instr = _active(self.triggers, ss.progress)
+        rec = StepRecord(t, state.x, state.y, state.yaw, state.speed, ss.progress,
+                         self.instr[k].id if k >= 0 else -1, 1 if ss.outside else 0, ss.route_dist,
+                         tuple(events))
+        for cb in self.callbacks:
+            cb.on_step(self, rec)
+        done = self.monitor.update(t, ss.progress, ss.route_dist, state.speed, events)
+        if done:
+            self._finish(Termination(done), t)
+            return True
+        return False
+
+    def _observation(self) -> Observation:
+        """The agent's observation at the current step (BEV, speed, instruction, notice)."""
+        state, params, progress, k_instr = self.state, self.params, self.progress, self.k_instr
+        frame = self.frame
+        notice = ""
+        for n in self.notices:
+            if n.trigger <= progress < n.end:
+                notice = n.text
+        callbacks = self.callbacks
+        for cb in callbacks:
+            cb.on_render_start(self)
+        bev = self.renderer.render((state.x, state.y, state.yaw), (params.length, params.width),
+                                   frame.vehicles, frame.pedestrians, frame.tl_states)
+        for cb in callbacks:
+            cb.on_render_end(self)
+        world = None
+        if self.privileged:
+            world = World(net=self.net, ego=state, lane=frame.lane, lane_pos=frame.lane_pos,
+                          vehicles=frame.vehicles, pedestrians=frame.pedestrians,
+                          tl_states=frame.tl_states, route=self.ego_route if self.needs_route else None,
+                          progress=progress)
+        obs = Observation(t=frame.t, bev=bev, speed=state.speed,
+                          instruction=self.texts[k_instr] if k_instr >= 0 else "",
+                          instruction_id=self.instr[k_instr].id if k_instr >= 0 else -1,
+                          notice=notice, world=world)
+        for cb in callbacks:
+            cb.on_observation(self, obs)
+        return obs
+
+    # ------------------------------------------------------------------ results
+    def log(self, agent: str) -> EpisodeLog:
+        """The episode log so far (complete once the episode has ended), under ``agent``."""
+        cols, instructions, scenario = self.recorder.cols, self.instructions, self.scenario
+        return EpisodeLog(
+            route_id=scenario.route_id, agent=agent,
+            family=instructions.family, k=instructions.k, seed=scenario.seed, step_length=self.dt,
+            route_length=self.route.total, t=tuple(cols["t"]), x=tuple(cols["x"]), y=tuple(cols["y"]),
+            yaw=tuple(cols["yaw"]), speed=tuple(cols["speed"]), progress=tuple(cols["progress"]),
+            instruction=tuple(cols["instruction"]), outside=tuple(cols["outside"]),
+            route_dist=tuple(cols["route_dist"]), events=tuple(self.recorder.events),
+            termination=self.termination, termination_t=self.term_t, message=self.message,
+        )
+
+
+def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
+                options: RunOptions = RunOptions(),  # noqa: B008
+                callbacks: Sequence[EpisodeCallback] = ()) -> EpisodeLog:
+    """Drive one episode with ``agent`` and return its log (:class:`icrsumo.types.EpisodeLog`).
+
+    The agent is reset with the episode's :class:`EpisodeInfo`, then acts on every observation;
+    ``callbacks`` (:mod:`icrsumo.sim.callbacks`) attach side effects such as timings or video.
+    A privileged agent (``privileged = True``) sees the :class:`World` view, with the route only
+    when it also declares ``needs_route = True``."""
+    with Episode(scenario, instructions, options, privileged=bool(getattr(agent, "privileged", False)),
+                 needs_route=bool(getattr(agent, "needs_route", False)), callbacks=callbacks) as ep:
+        agent.reset(ep.info)
+        obs = ep.start()
+        hooks = ep.callbacks[1:]  # the recorder needs no act hooks
+        while obs is not None:
+            for cb in hooks:
+                cb.on_act_start(ep, obs)
+            action = agent.act(obs)
+            for cb in hooks:
+                cb.on_act_end(ep, action)
+            obs = ep.step(action)
+    return ep.log(getattr(agent, "name", type(agent).__name__))

@@ -1,0 +1,164 @@
+"""Remote agents without SUMO: the icrsumo-agent/1 codec, clear errors for broken or slow
+servers and for a server that is down, and the reference server batching concurrent acts."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+import numpy as np
+import pytest
+
+from icrsumo.agents.base import Action, AgentError, AgentTimeout, EpisodeInfo, Observation
+from icrsumo.agents.registry import register, unregister
+from icrsumo.agents.remote import (
+    PROTOCOL,
+    RemoteAgent,
+    decode_action,
+    decode_array,
+    decode_obs,
+    encode_action,
+    encode_array,
+    encode_obs,
+    free_port,
+)
+from icrsumo.cli import main
+
+INFO = EpisodeInfo("r", "town", "net.xml", 0.05, 0.1, 7)
+
+
+def _obs(t: float = 20.05) -> Observation:
+    bev = np.zeros((7, 128, 128), np.uint8)
+    bev[0, 40:100, 50:80] = 255
+    return Observation(t=t, bev=bev, speed=3.25, instruction="At the T-junction, turn left.",
+                       instruction_id=0, notice="")
+
+
+def test_codec_round_trips_exactly():
+    obs = _obs(t=21.349999999999998)
+    back = decode_obs(json.loads(json.dumps(encode_obs(obs))))
+    assert np.array_equal(back.bev, obs.bev) and back.bev.dtype == np.uint8
+    assert (back.t, back.speed, back.instruction) == (obs.t, obs.speed, obs.instruction)
+    assert (back.notice, back.instruction_id) == (obs.notice, obs.instruction_id)
+    w = np.array([[2.5, 0.1], [5.0, 1 / 3]])
+    a = decode_action(json.loads(json.dumps(encode_action(Action(waypoints=w, target_speed=4.1)))))
+    assert np.array_equal(a.waypoints, w) and a.target_speed == 4.1
+    arr = np.arange(12, dtype=np.float32).reshape(3, 4)
+    assert np.array_equal(decode_array(encode_array(arr), "x"), arr)
+
+
+def test_server_down_is_one_line_exit_2(tmp_path, capsys):
+    port = free_port()
+    code = main(["evaluate", "--out", str(tmp_path / "o"), "--quiet", "--agent", f"remote:http://127.0.0.1:{port}"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "not reachable (connection refused)" in err[0]
+    assert not (tmp_path / "o").exists()
+    assert main(["serve-agent", "route-oracle", "--port", "0"]) == 2
+    assert "privileged agent" in capsys.readouterr().err
+
+
+class _Stub(BaseHTTPRequestHandler):
+    """A broken server: /act answers `answer`, slowly when `delay` is set."""
+
+    protocol_version = "HTTP/1.1"
+    answer = b"{}"
+    delay = 0.0
+
+    def log_message(self, *args):
+        pass
+
+    def do_POST(self):  # noqa: N802
+        self.rfile.read(int(self.headers["Content-Length"]))
+        body = json.dumps({"protocol": PROTOCOL}).encode() if self.path == "/reset" else self.answer
+        time.sleep(self.delay if self.path == "/act" else 0.0)
+        self.send_response(200)
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+
+@pytest.mark.parametrize("answer, delay, error, expect", [
+    (b"<html>oops</html>", 0.0, AgentError, "answered malformed data: not JSON"),
+    (json.dumps({"protocol": "other/9"}).encode(), 0.0, AgentError, "protocol 'other/9'"),
+    (json.dumps({"protocol": PROTOCOL, "action": {"waypoints": {"dtype": "uint8", "shape": [2, 2],
+                                                                "data": "AAAA"}}}).encode(),
+     0.0, AgentError, "action.waypoints: data is not base64 of zlib-compressed bytes"),
+    (json.dumps({"protocol": PROTOCOL, "action": {"control": {"steer": "left"}}}).encode(),
+     0.0, AgentError, "control.steer must be a number"),
+    (json.dumps({"protocol": PROTOCOL}).encode(), 1.5, AgentTimeout, "agent did not answer within 0.3 s"),
+])
+def test_malformed_or_slow_answers_are_clear_errors(answer, delay, error, expect):
+    handler = type("H", (_Stub,), {"answer": answer, "delay": delay})
+    httpd = ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    try:
+        agent = RemoteAgent(f"http://127.0.0.1:{httpd.server_address[1]}", "stub", timeout=0.3)
+        agent.reset(INFO)
+        with pytest.raises(error) as err:
+            agent.act(_obs())
+        assert expect in str(err.value) and "\n" not in str(err.value)
+    finally:
+        httpd.shutdown()
+        httpd.server_close()
+
+
+class _SlowBatch:
+    """A static act_batch(agents, observations) that takes 0.2 s per batch whatever its size, and
+    per-episode state (a call counter) kept in each session's own instance."""
+
+    name = "slow-batch"
+    privileged = False
+
+    def reset(self, info):
+        self.calls = 0
+
+    def act(self, obs):
+        return _SlowBatch.act_batch([self], [obs])[0]
+
+    @staticmethod
+    def act_batch(agents, observations):
+        time.sleep(0.2)
+        out = []
+        for agent, obs in zip(agents, observations):
+            agent.calls += 1
+            out.append(Action(waypoints=np.array([[1.0, 0.0]]), target_speed=obs.speed + 100 * agent.calls))
+        return out
+
+
+def test_concurrent_acts_are_batched_with_per_session_state():
+    from icrsumo.agents.serve import AgentServer
+
+    register("slow-batch", _SlowBatch)
+    try:
+        server = AgentServer("slow-batch", max_batch=4).start()
+    finally:
+        unregister("slow-batch")
+    try:
+        agents = [RemoteAgent(server.url, "slow-batch", timeout=10) for _ in range(6)]
+        for a in agents:
+            a.reset(INFO)
+        results: list[list[float]] = [[] for _ in agents]
+
+        def drive(i):
+            for _ in range(2):
+                obs = Observation(0.0, np.zeros((7, 4, 4), np.uint8), float(i), "", -1, "")
+                results[i].append(agents[i].act(obs).target_speed)
+
+        t0 = time.perf_counter()
+        threads = [threading.Thread(target=drive, args=(i,)) for i in range(6)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        elapsed = time.perf_counter() - t0
+        assert results == [[100.0 + i, 200.0 + i] for i in range(6)]  # each session its own answers
+        stats = server.stats
+        assert stats["acts"] == 12 and 1 < stats["largest_batch"] <= 4 and stats["batches"] < 12
+        assert elapsed < 12 * 0.2
+        for a in agents:
+            a.close()
+        assert len(server.sessions) == 0
+    finally:
+        server.shutdown()

@@ -1,0 +1,175 @@
+"""The pure sensors and the drivable area, without SUMO: recorded frames of real episodes
+(tests/data/frames/*.json, written by tools/record_frames.py) replayed through
+``Sensors.detect`` give back the logged events and readings float for float, and hand-made
+frames exercise each rule."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import FrozenInstanceError
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from icrsumo.dynamics import EgoState
+from icrsumo.networks import load_net
+from icrsumo.resources import bundled_towns
+from icrsumo.sim.drivable import DrivableArea, drivable_area
+from icrsumo.sim.frame import Contact, SimFrame, frame_from_dict, frame_to_dict
+from icrsumo.sim.sensors import RouteProjection, Sensors, SensorState
+from icrsumo.vocab import EventKind
+
+FRAMES = Path(__file__).resolve().parents[1] / "data" / "frames"
+CASES = sorted(p.stem for p in FRAMES.glob("*.json"))
+
+
+def _case(name: str) -> tuple[dict, Sensors]:
+    doc = json.loads((FRAMES / f"{name}.json").read_text(encoding="utf-8"))
+    net = load_net(bundled_towns()[doc["town"]])
+    sensors = Sensors(net, RouteProjection(np.asarray(doc["polyline"], dtype=float)),
+                      frozenset(doc["edges"]), drivable_area(net), tuple(doc["size"]))
+    return doc, sensors
+
+
+def test_every_rule_is_covered_by_a_recording():
+    kinds = set()
+    for name in CASES:
+        doc = json.loads((FRAMES / f"{name}.json").read_text(encoding="utf-8"))
+        kinds |= {e[0] for row in doc["steps"] for e in row["events"]}
+    assert {"collision_static", "wrong_way", "red_light", "stop_sign", "collision_vehicle"} <= kinds
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_recorded_frames_replay_to_the_logged_events_and_readings(name):
+    doc, sensors = _case(name)
+    state = SensorState()
+    for i, row in enumerate(doc["steps"]):
+        frame = frame_from_dict(row["frame"])
+        assert frame_to_dict(frame) == row["frame"]
+        ego = EgoState(*row["ego"])
+        events, state = sensors.detect(state, frame, ego)
+        got = [[str(e.kind), e.t, e.pos, e.other, e.x, e.y] for e in events]
+        assert got == row["events"], (name, i)
+        progress, route_dist, outside, _ = row["step"]
+        got_step = (state.progress, state.route_dist, int(state.outside))
+        assert got_step == (progress, route_dist, outside), (name, i)
+
+
+def test_detect_is_pure_and_state_is_frozen():
+    doc, sensors = _case("blind_tiny_001")
+    rows = doc["steps"]
+    k = next(i for i, r in enumerate(rows) if r["events"])
+    state = SensorState()
+    for r in rows[:k]:
+        _, state = sensors.detect(state, frame_from_dict(r["frame"]), EgoState(*r["ego"]))
+    frame, ego = frame_from_dict(rows[k]["frame"]), EgoState(*rows[k]["ego"])
+    a = sensors.detect(state, frame, ego)
+    b = sensors.detect(state, frame, ego)
+    assert a == b and a[0]  # same inputs, same events and state; the input state is untouched
+    with pytest.raises(FrozenInstanceError):
+        state.progress = 1.0  # type: ignore[misc]
+
+
+def _lane_point(net, lane: str, frac: float = 0.5) -> tuple[float, float, float]:
+    return net.lane_pose(lane, frac * net.lane_length[lane])
+
+
+@pytest.fixture(scope="module")
+def grid():
+    net = load_net(bundled_towns()["icr_grid"])
+    lane = next(lid for lid in sorted(net.lane_shape)
+                if not lid.startswith(":") and net.lane_length[lid] > 40)
+    edge = lane.rsplit("_", 1)[0]
+    poly = net.lane_shape[lane]
+    sensors = Sensors(net, RouteProjection(np.asarray(poly, dtype=float)), frozenset({edge}),
+                      drivable_area(net), (4.6, 1.9))
+    return net, lane, sensors
+
+
+def test_contacts_count_once_per_actor_and_pedestrians_by_kind(grid):
+    net, lane, sensors = grid
+    x, y, yaw = _lane_point(net, lane)
+    ego = EgoState(x, y, yaw, 5.0)
+    state = SensorState()
+    car, ped = Contact("car1", False), Contact("p0", True)
+    # (the ego's contacts, SUMO reported some collision): contacts are refreshed only on steps
+    # where SUMO reports collisions, so a step without any report does not end a contact
+    seq = [((car,), True), ((car,), True), ((car, ped), True), ((), False), ((car,), True),
+           ((), True), ((car,), True)]
+    kinds = []
+    for i, (contacts, any_collision) in enumerate(seq):
+        frame = SimFrame(t=0.05 * i, ego_present=True, lane=lane, lane_pos=net.lane_length[lane] / 2,
+                         contacts=contacts, any_collision=any_collision)
+        events, state = sensors.detect(state, frame, ego)
+        kinds.append([(str(e.kind), e.other) for e in events])
+    assert kinds == [[("collision_vehicle", "car1")], [], [("collision_pedestrian", "p0")], [], [], [],
+                     [("collision_vehicle", "car1")]]
+
+
+def test_roadside_fires_on_leaving_the_road_once_and_again_after_return(grid):
+    net, lane, sensors = grid
+    x, y, yaw = _lane_point(net, lane)
+    on = EgoState(x, y, yaw, 5.0)
+    nx, ny = -math.sin(yaw), math.cos(yaw)
+    off = EgoState(x + 40.0 * nx, y + 40.0 * ny, yaw, 5.0)  # 40 m to the lane's left
+    assert sensors.drivable.count_off([(off.x, off.y)]) == 1
+    state, seen = SensorState(), []
+    for ego in (on, off, off, on, off):
+        frame = SimFrame(t=0.0, ego_present=True, lane="", lane_pos=0.0)
+        events, state = sensors.detect(state, frame, ego)
+        seen.append([str(e.kind) for e in events if e.kind == EventKind.COLLISION_STATIC])
+    assert seen == [[], ["collision_static"], [], [], ["collision_static"]]
+
+
+def test_wrong_way_and_outside(grid):
+    net, lane, sensors = grid
+    x, y, yaw = _lane_point(net, lane)
+    pos = net.lane_length[lane] / 2
+    frame = SimFrame(t=0.0, ego_present=True, lane=lane, lane_pos=pos)
+    events, state = sensors.detect(SensorState(), frame, EgoState(x, y, yaw + math.pi, 3.0))
+    assert [str(e.kind) for e in events] == ["wrong_way"] and state.outside and state.wrong
+    events, state = sensors.detect(state, frame, EgoState(x, y, yaw, 3.0))
+    assert events == [] and not state.outside
+
+
+def test_background_teleports_are_recorded(grid):
+    net, lane, sensors = grid
+    x, y, yaw = _lane_point(net, lane)
+    frame = SimFrame(t=1.0, ego_present=True, lane=lane, lane_pos=1.0, teleports=("bg1", "bg2"))
+    events, _ = sensors.detect(SensorState(), frame, EgoState(x, y, yaw, 3.0))
+    assert [(str(e.kind), e.other) for e in events] == [("teleport_background", "bg1"),
+                                                      ("teleport_background", "bg2")]
+
+
+@pytest.mark.parametrize("town", sorted(bundled_towns()))
+def test_drivable_area_cells_give_the_exact_predicate(town):
+    net = load_net(bundled_towns()[town])
+    area = DrivableArea(drivable_area(net).geometry)  # a fresh memo
+    rng = np.random.default_rng(5)
+    pts = np.concatenate(list(net.lane_shape.values()))
+    near = pts[rng.integers(len(pts), size=4000)] + rng.normal(0.0, 4.0, (4000, 2))
+    got = [area.contains(float(x), float(y)) for x, y in near]
+    assert got == area.contains_xy(near).tolist()
+    assert 0.2 < np.mean(got) < 0.95  # both answers occur near the lanes
+    assert not area.contains(float("nan"), 0.0) and not area.contains(math.inf, 0.0)
+    assert area.count_off([(1e7, 1e7), (float("nan"), 0.0)]) == 2
+
+
+def test_drivable_area_holds_junctions_and_not_their_walking_areas():
+    net = load_net(bundled_towns()["icr_grid"])
+    area = drivable_area(net)
+    sn = net.sumolib_net
+    walk = [ln for e in sn.getEdges(withInternal=True) if e.getFunction() == "walkingarea"
+            for ln in e.getLanes()]
+    assert walk, "the grid town has sidewalks"
+    from shapely.geometry import Polygon
+
+    inside_walk = [Polygon(ln.getShape()).representative_point() for ln in walk if len(ln.getShape()) >= 3]
+    assert not any(area.contains(p.x, p.y) for p in inside_walk)
+    tls_nodes = [n for n in sn.getNodes() if n.getType() == "traffic_light"]
+    assert tls_nodes
+    for node in tls_nodes:
+        cx, cy = node.getCoord()[:2]
+        assert area.contains(cx, cy), node.getID()  # the middle of a signalised crossroads
