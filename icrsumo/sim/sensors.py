@@ -18,7 +18,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -309,7 +309,6 @@ class Sensors:
         # the lights the next step's red-light check reads: those ahead of prev_lane, now
         tls = self.tls_ahead(prev_lane)
         lights = {tl: frame.tl_states[tl] for tl in tls} if tls else {}
-        new = replace(state, progress=pos, route_dist=rdist,
-                      outside=not self.inside(lane) or wrong, prev_lane=prev_lane,
-                      touching=touching, stopped=stopped, roadside=off, wrong=wrong, lights=lights)
+        new = SensorState(pos, rdist, not self.inside(lane) or wrong, prev_lane, touching, stopped, off,
+                          wrong, lights)
         return ev, new

@@ -12,6 +12,7 @@ from icrsumo.agents.base import Action
 from icrsumo.agents.privileged import InstructionFollower, RouteOracle
 from icrsumo.agents.registry import make_agent
 from icrsumo.convert import ConvertOptions, convert_routes
+from icrsumo.dynamics import Control
 from icrsumo.errors import InputError
 from icrsumo.instructions.generate import GenerateOptions, generate
 from icrsumo.instructions.store import read_instruction_sets
@@ -253,7 +254,7 @@ def test_scores_do_not_depend_on_the_bev_raster(quiet):
     coarse = RunOptions(bev=BevSpec(m_per_px=1.0, height=64, width=96, behind_m=8.0,
                                     channels=("vehicles", "drivable")))
     kinds = set()
-    for agent in (Swerve, BlindOracle):
+    for agent in (Swerve, BlindOracle):  # Swerve leaves the road; BlindOracle runs a route
         plain = run_episode(sc, sets[0], agent())
         other = run_episode(sc, sets[0], agent(), coarse)
         assert dumps_log(plain) == dumps_log(other)
@@ -262,29 +263,19 @@ def test_scores_do_not_depend_on_the_bev_raster(quiet):
     assert "collision_static" in kinds  # the roadside rule is exercised
 
 
-class _Peek(RouteOracle):
-    """Records whether its World view carries the route."""
-
-    name = "peek"
-
-    def __init__(self, needs_route: bool) -> None:
-        super().__init__()
-        self.needs_route = needs_route
-        self.seen: set[bool] = set()
-
-    def act(self, obs):
-        self.seen.add(obs.world.route is not None)
-        if obs.world.route is None:
-            from icrsumo.dynamics import Control
-
-            return Action(control=Control(brake=1.0))
-        return super().act(obs)
-
-
 def test_only_agents_that_declare_it_get_the_route(quiet):
+    from icrsumo.sim.episode import Episode
+
     sc, sets = _load(quiet, "tiny", "tiny_003")
-    with_route, without = _Peek(True), _Peek(False)
-    run_episode(sc, sets[0], with_route)
-    log = run_episode(sc, sets[0], without)
-    assert with_route.seen == {True} and without.seen == {False} and log.t
+    seen = {}
+    for needs_route in (True, False):
+        with Episode(sc, sets[0], privileged=True, needs_route=needs_route) as ep:
+            obs, routes = ep.start(), set()
+            for _ in range(5):
+                routes.add(obs.world.route is not None)
+                obs = ep.step(Action(control=Control(brake=1.0)))
+            seen[needs_route] = routes
+    assert seen == {True: {True}, False: {False}}
     assert RouteOracle.needs_route and not getattr(InstructionFollower, "needs_route", False)
+    with Episode(sc, sets[0]) as ep:  # not privileged: no World view at all
+        assert ep.start().world is None
