@@ -12,12 +12,13 @@ from __future__ import annotations
 
 import contextlib
 import math
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from ..resources import sumo_home
 from ..scenario import Scenario
-from .frame import Contact, SimFrame
+from .frame import NO_LIGHTS, Contact, SimFrame
 
 EGO_ID = "ego"
 #: radius (m) of the context subscription around the ego (nearby vehicles and persons)
@@ -219,8 +220,11 @@ class SumoBackend:
         with _translated():
             self._session.ls.simulationStep()
 
-    def read(self, surroundings: bool = False) -> SimFrame:
-        """SUMO's state at the current step (see :class:`SimFrame`)."""
+    def read(self, surroundings: bool = False,
+             lights: Callable[[str], Sequence[str]] | None = None) -> SimFrame:
+        """SUMO's state at the current step (see :class:`SimFrame`): with the surroundings (nearby
+        actors and every light's state) when ``surroundings``; otherwise the states of every
+        light, or, given ``lights`` (the ego's lane -> light ids), of those lights only."""
         with _translated():
             ls = self._session.ls
             t = float(ls.simulation.getTime())
@@ -244,12 +248,18 @@ class SumoBackend:
                 contacts = tuple(found)
             teleports = ls.simulation.getStartingTeleportIDList()
             teleports = tuple(v for v in teleports if v != EGO_ID) if teleports else ()
-            tl_all, tl_var = ls.trafficlight.getAllSubscriptionResults(), self._tl_var
-            tl_states = {tl: tl_all[tl][tl_var] for tl in self.tls_ids}
+            lane, tl_var = sub.get(self._lane_var, ""), self._tl_var
+            if surroundings or lights is None:
+                tl_all = ls.trafficlight.getAllSubscriptionResults()
+                tl_states = {tl: tl_all[tl][tl_var] for tl in self.tls_ids}
+            else:
+                wanted = lights(lane)
+                get = ls.trafficlight.getSubscriptionResults
+                tl_states = {tl: get(tl)[tl_var] for tl in wanted} if wanted else NO_LIGHTS
             vehicles = pedestrians = None
             if surroundings:
                 vehicles, pedestrians = self._surroundings(ls)
-            return SimFrame(t=t, ego_present=True, lane=sub.get(self._lane_var, ""),
+            return SimFrame(t=t, ego_present=True, lane=lane,
                             lane_pos=float(sub.get(self._pos_var, 0.0)), contacts=contacts,
                             any_collision=bool(colls),
                             teleports=teleports, tl_states=tl_states, vehicles=vehicles,

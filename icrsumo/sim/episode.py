@@ -127,6 +127,8 @@ class Episode:
         self.n_max = int((route_timeout(self.route.total) + 10.0) / self.dt) + 10
         self.k_instr = -1
         self.i = 0
+        #: the ego's lane -> the lights the sensors need in this step's frame
+        self._lights = lambda lane: self.sensors.lights_needed(self.sensor_state, lane)
 
     # ------------------------------------------------------------------ lifecycle
     def __enter__(self) -> Episode:
@@ -229,7 +231,7 @@ class Episode:
 
     def _record_step(self, observe: bool) -> bool:
         """Read SUMO's frame, detect events, record the step; True when the episode ended."""
-        frame = self.frame = self.backend.read(surroundings=observe)
+        frame = self.frame = self.backend.read(surroundings=observe, lights=self._lights)
         state, t = self.state, frame.t
         if not frame.ego_present:  # SUMO teleported or removed the ego
             self.recorder.events.append(Event(EventKind.EGO_TELEPORT, t, self.progress, "", state.x, state.y))

@@ -8,9 +8,13 @@ code that fills it, so sensors and the loop can be unit-tested from recorded fra
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from types import MappingProxyType
 
 import numpy as np
+
+#: the empty, read-only light-state mapping (a frame's default)
+NO_LIGHTS: Mapping[str, str] = MappingProxyType({})
 
 
 @dataclass(frozen=True)
@@ -32,7 +36,8 @@ class SimFrame:
     collisions this step; ``any_collision``: SUMO reported a collision this step, the ego's or
     others' (the sensors refresh their contacts then). ``teleports``: background vehicles that
     started a teleport this step (a jam). ``tl_states``: traffic-light id -> signal state
-    string (one character per link index) of every light of the network. ``vehicles``
+    string (one character per link index): every light of the network on frames read with the
+    surroundings, else the lights the reader asked for. ``vehicles``
     (N, 5): other vehicles within the context radius, centre x, y (m), yaw (rad), length,
     width (m); ``pedestrians`` (M, 2): person centres (m); both are None on frames read
     without the surroundings.
@@ -45,13 +50,9 @@ class SimFrame:
     contacts: tuple[Contact, ...] = ()
     any_collision: bool = False
     teleports: tuple[str, ...] = ()
-    tl_states: Mapping[str, str] = None  # type: ignore[assignment]
+    tl_states: Mapping[str, str] = field(default_factory=lambda: NO_LIGHTS)
     vehicles: np.ndarray | None = None
     pedestrians: np.ndarray | None = None
-
-    def __post_init__(self) -> None:
-        if self.tl_states is None:
-            object.__setattr__(self, "tl_states", {})
 
 
 def frame_to_dict(frame: SimFrame) -> dict:

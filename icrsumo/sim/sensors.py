@@ -18,7 +18,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -27,7 +27,7 @@ from ..networks import RoadNet
 from ..types import Event
 from ..vocab import EventKind
 from .drivable import DrivableArea
-from .frame import SimFrame
+from .frame import NO_LIGHTS, SimFrame
 
 #: an approach to a stop sign counts as stopped below this speed (m/s) within this distance (m)
 STOP_SPEED, STOP_ZONE = 0.1, 15.0
@@ -205,11 +205,7 @@ class SensorState:
     stopped: frozenset[str] = frozenset()
     roadside: bool = False
     wrong: bool = False
-    lights: Mapping[str, str] = None  # type: ignore[assignment]
-
-    def __post_init__(self) -> None:
-        if self.lights is None:
-            object.__setattr__(self, "lights", {})
+    lights: Mapping[str, str] = field(default_factory=lambda: NO_LIGHTS)
 
 
 class Sensors:
@@ -253,6 +249,12 @@ class Sensors:
                                if c.tls and c.from_lane == i)
             got = self._tls_ahead[lane] = tuple(sorted(out))
         return got
+
+    def lights_needed(self, state: SensorState, lane: str) -> tuple[str, ...]:
+        """The lights whose states :meth:`detect` needs in the frame in which SUMO reports the
+        ego on ``lane`` ("" off every lane), after ``state``: those ahead of the lane it then
+        remembers."""
+        return self.tls_ahead(lane or state.prev_lane)
 
     def detect(self, state: SensorState, frame: SimFrame, ego: EgoState) -> tuple[list[Event], SensorState]:
         """The events of the step ``frame`` (the ego present) with the ego at ``ego`` (centre,
@@ -308,7 +310,7 @@ class Sensors:
         prev_lane = lane or prev
         # the lights the next step's red-light check reads: those ahead of prev_lane, now
         tls = self.tls_ahead(prev_lane)
-        lights = {tl: frame.tl_states[tl] for tl in tls} if tls else {}
+        lights = {tl: frame.tl_states[tl] for tl in tls} if tls else NO_LIGHTS
         new = SensorState(pos, rdist, not self.inside(lane) or wrong, prev_lane, touching, stopped, off,
                           wrong, lights)
         return ev, new
