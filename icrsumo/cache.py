@@ -18,7 +18,7 @@ from .convert import ConvertOptions, convert_routes, safe_name
 from .errors import InputError
 from .fsio import write_atomic
 from .instructions.generate import GenerateOptions, generate
-from .resources import bundled_suites
+from .resources import bundled_suites, suite_coords
 from .routes import format_routes, read_routes
 
 #: the route the environment and check-agent use by default: 78 m in icr_grid, one left turn
@@ -62,7 +62,8 @@ def bundled_route(route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUITE,
         if not (sc_dir / "scenario.json").is_file():
             routes_file = root / "route.xml"
             write_atomic(routes_file, format_routes([spec]))
-            report = convert_routes(routes_file, root, ConvertOptions(traffic=traffic, workers=1))
+            report = convert_routes(routes_file, root, ConvertOptions(coords=suite_coords(suite) or "sumo",
+                                                                      traffic=traffic, workers=1))
             if report.failures:
                 raise InputError(suites[suite], f"route {route}", f"conversion failed: {report.failures[0]}",
                                  "report this as a bug")

@@ -14,13 +14,15 @@ from .errors import InputError
 
 def _cmd_convert_routes(args: argparse.Namespace) -> int:
     from .convert import ConvertOptions, convert_routes
-    from .resources import bundled_suites
+    from .resources import bundled_suites, suite_coords
 
     routes = Path(args.routes)
+    coords = args.coords
     if not routes.exists() and args.routes in bundled_suites():
         routes = bundled_suites()[args.routes]
+        coords = coords or suite_coords(args.routes)  # a bundled suite knows its frame
     opts = ConvertOptions(
-        coords=args.coords, traffic=args.traffic, net=args.net, xodr=args.xodr,
+        coords=coords or "sumo", traffic=args.traffic, net=args.net, xodr=args.xodr,
         net_dir=args.net_dir, max_snap=args.max_snap, seed=args.seed, warmup=args.warmup,
         workers=args.workers,
     )
@@ -181,14 +183,16 @@ def build_parser() -> argparse.ArgumentParser:
         description="Convert a leaderboard-style route file (or a bundled split: tiny, short, "
         "long, train) into SUMO scenarios with background traffic.",
     )
-    p.add_argument("routes", help="route XML file, or the name of a bundled split")
+    p.add_argument("routes", help="route XML file, or the name of a bundled suite (tiny, short, long, "
+                                  "train, langauto-tiny, langauto-short, langauto-long)")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--net", type=Path, help="use this .net.xml for every route")
     p.add_argument("--xodr", type=Path, help="convert this OpenDRIVE file (cached) for every route")
     p.add_argument("--net-dir", type=Path,
                    help="folder with <town>.net.xml or <town>.xodr per route town")
-    p.add_argument("--coords", choices=["sumo", "carla"], default="sumo",
-                   help="waypoint frame: sumo (default) or CARLA's left-handed frame")
+    p.add_argument("--coords", choices=["sumo", "carla"], default=None,
+                   help="waypoint frame: sumo (default) or CARLA's left-handed frame (a bundled "
+                        "suite's own frame by default: carla for the langauto-* suites)")
     p.add_argument("--traffic", choices=["none", "light", "normal", "dense"], default="normal")
     p.add_argument("--max-snap", type=float, default=10.0,
                    help="farthest a waypoint may lie from a drivable lane (m, default 10)")
@@ -243,7 +247,8 @@ def build_parser() -> argparse.ArgumentParser:
         "and write summary.json, tables and figures.",
     )
     v.add_argument("--suite", default="tiny",
-                   help="tiny (default), short, long, a route XML file or a convert-routes folder")
+                   help="tiny (default), short, long, langauto-tiny, langauto-short, langauto-long, "
+                        "a route XML file or a convert-routes folder")
     v.add_argument("--agent", action="append",
                    help="built-in name, module:Class, path/file.py:Class or remote:http://HOST:PORT "
                    "(repeatable; default bev-token)")

@@ -22,15 +22,32 @@ def data_dir(name: str) -> Path:
 
 
 def bundled_towns() -> dict[str, Path]:
-    """Bundled town name -> its ``.net.xml`` path."""
-    return {
-        p.name[: -len(".net.xml")]: p for p in sorted(data_dir("networks").glob("*.net.xml"))
-    }
+    """Bundled town name -> its ``.net.xml`` path: icrsumo's own towns (``networks/``) and
+    CARLA's LangAuto towns ``Town01`` ... ``Town10HD`` (``networks/carla/``)."""
+    root = data_dir("networks")
+    files = sorted(root.glob("*.net.xml")) + sorted(root.glob("*/*.net.xml"))
+    return {p.name[: -len(".net.xml")]: p for p in files}
 
 
 def bundled_suites() -> dict[str, Path]:
-    """Bundled route split name (tiny, short, long, train) -> its route XML path."""
-    return {p.stem: p for p in sorted(data_dir("routes").glob("*.xml"))}
+    """Bundled route suite name -> its route XML path: icrsumo's splits (tiny, short, long,
+    train: ``routes/``) and LangAuto's tracks (langauto-tiny, langauto-short, langauto-long:
+    ``routes/langauto/``)."""
+    root = data_dir("routes")
+    files = sorted(root.glob("*.xml")) + sorted(root.glob("*/*.xml"))
+    return {p.stem: p for p in files}
+
+
+def suite_coords(suite: str) -> str | None:
+    """The coordinate frame (``sumo`` or ``carla``) of a bundled suite's route file, from the
+    ``suite.json`` beside it (``None``: not a bundled suite, or no frame recorded)."""
+    import json
+
+    path = bundled_suites().get(suite)
+    meta = path.parent / "suite.json" if path is not None else None
+    if meta is None or not meta.is_file():
+        return "sumo" if path is not None else None
+    return str(json.loads(meta.read_text(encoding="utf-8")).get("coords", "sumo"))
 
 
 @cache

@@ -232,7 +232,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent.parent / "routes")
     args = ap.parse_args()
-    towns = {name: load_net(path) for name, path in bundled_towns().items()}
+    # icrsumo's own towns (networks/), not the bundled CARLA towns (networks/carla/)
+    towns = {name: load_net(path) for name, path in bundled_towns().items() if path.parent.name == "networks"}
     names = list(towns)
     used: set[tuple[str, ...]] = set()
     rng = np.random.default_rng(EVAL_SEED)

@@ -76,4 +76,5 @@ class EvalOptions:
         p = Path(self.suite)
         if self.suite not in bundled_suites() and not p.is_file() and not (p / "index.json").is_file():
             raise InputError("--suite", self.suite, "unknown suite",
-                             "use tiny, short, long, a route XML file or a convert-routes folder")
+                             f"use {', '.join(bundled_suites())}, a route XML file or a "
+                             "convert-routes folder")

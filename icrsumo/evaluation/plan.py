@@ -15,7 +15,7 @@ from ..errors import InputError
 from ..fsio import dumps_json, write_atomic
 from ..instructions.families import FAMILIES
 from ..instructions.generate import GenerateOptions, generate
-from ..resources import bundled_suites
+from ..resources import bundled_suites, suite_coords
 from ..scenario import find_scenarios, read_scenario
 from .options import EvalOptions
 
@@ -75,7 +75,9 @@ def _resolve_suite(opts: EvalOptions, out: Path) -> tuple[Path, list[str]]:
         return p, []
     routes = bundled_suites().get(opts.suite, p)
     target = out / "scenarios"
-    report = convert_routes(routes, target, ConvertOptions(traffic=opts.traffic, workers=opts.workers))
+    coords = suite_coords(opts.suite) or "sumo"  # a bundled suite knows its frame (langauto-*: carla)
+    report = convert_routes(routes, target, ConvertOptions(coords=coords, traffic=opts.traffic,
+                                                           workers=opts.workers))
     return target, list(report.failures)
 
 
