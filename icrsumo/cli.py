@@ -10,6 +10,7 @@ from pathlib import Path
 
 from . import __version__
 from .errors import InputError
+from .vocab import Family
 
 
 def _cmd_convert_routes(args: argparse.Namespace) -> int:
@@ -231,7 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("scenario", help="a scenario folder written by convert-routes")
     e.add_argument("--instructions", required=True, help="the route's file written by generate")
     e.add_argument("--family", default="baseline",
-                   choices=["baseline", "paraphrase", "ambiguity", "noise", "misleading"])
+                   choices=[str(f) for f in Family])
     e.add_argument("--k", type=int, default=0, help="variant index (default 0)")
     e.add_argument("--agent", default=None,
                    help="built-in name, module:Class, file.py:Class or remote:URL (default: the "

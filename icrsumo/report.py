@@ -16,6 +16,7 @@ import numpy as np
 from .aggregate import BASELINE, EPISODE_COLUMNS, episode_table
 from .fsio import dumps_json, write_atomic
 from .types import EpisodeLog, EpisodeRecord
+from .vocab import EpisodeStatus, EventKind, Family, Termination
 
 # --------------------------------------------------------------------------- tables
 _HEADER = ("Agent", "Family", "DS", "RC", "IS", "ΔDS [95% CI]", "ΔRC [95% CI]", "ΔIS", "worst ΔDS",
@@ -145,7 +146,8 @@ def _save(fig, path: Path) -> None:
     write_atomic(Path(path), buf.getvalue())
 
 
-_FAMILY_MARKERS = {BASELINE: "o", "paraphrase": "s", "ambiguity": "^", "noise": "D", "misleading": "v"}
+_FAMILY_MARKERS = {BASELINE: "o", Family.PARAPHRASE: "s", Family.AMBIGUITY: "^", Family.NOISE: "D",
+                   Family.MISLEADING: "v"}
 
 
 def _agent_colours(agents: Sequence[str]) -> dict[str, Any]:
@@ -296,20 +298,21 @@ def paired_rollout(net, baseline_log: EpisodeLog, variant_logs: list[tuple[str, 
 LB_INFRACTIONS = ("collisions_pedestrian", "collisions_vehicle", "collisions_layout", "red_light",
                   "stop_infraction", "outside_route_lanes", "route_dev", "route_timeout", "vehicle_blocked")
 _LB_KIND = {
-    "collision_pedestrian": ("collisions_pedestrian", "Agent collided against a pedestrian"),
-    "collision_vehicle": ("collisions_vehicle", "Agent collided against a vehicle"),
-    "collision_static": ("collisions_layout", "Agent collided against the static layout"),
-    "red_light": ("red_light", "Agent ran a red light"),
-    "stop_sign": ("stop_infraction", "Agent ran a stop sign"),
+    EventKind.COLLISION_PEDESTRIAN: ("collisions_pedestrian", "Agent collided against a pedestrian"),
+    EventKind.COLLISION_VEHICLE: ("collisions_vehicle", "Agent collided against a vehicle"),
+    EventKind.COLLISION_STATIC: ("collisions_layout", "Agent collided against the static layout"),
+    EventKind.RED_LIGHT: ("red_light", "Agent ran a red light"),
+    EventKind.STOP_SIGN: ("stop_infraction", "Agent ran a stop sign"),
 }
 _LB_TERMINATION = {  # termination -> (status, infraction key, message)
-    "completed": ("Completed", None, ""),
-    "route_deviation": ("Failed - Agent deviated from the route", "route_dev",
-                        "Agent deviated from the route"),
-    "route_timeout": ("Failed - Agent timed out", "route_timeout", "Route timeout."),
-    "agent_blocked": ("Failed - Agent got blocked", "vehicle_blocked", "Agent got blocked"),
-    "stuck": ("Failed - Agent got blocked", "vehicle_blocked", "Agent got stuck (SUMO teleported the ego)"),
-    "sim_error": ("Failed - Simulation crashed", None, ""),
+    Termination.COMPLETED: ("Completed", None, ""),
+    Termination.ROUTE_DEVIATION: ("Failed - Agent deviated from the route", "route_dev",
+                                  "Agent deviated from the route"),
+    Termination.ROUTE_TIMEOUT: ("Failed - Agent timed out", "route_timeout", "Route timeout."),
+    Termination.AGENT_BLOCKED: ("Failed - Agent got blocked", "vehicle_blocked", "Agent got blocked"),
+    Termination.STUCK: ("Failed - Agent got blocked", "vehicle_blocked",
+                        "Agent got stuck (SUMO teleported the ego)"),
+    Termination.SIM_ERROR: ("Failed - Simulation crashed", None, ""),
 }
 _LB_LABELS = ["Avg. driving score", "Avg. route completion", "Avg. infraction penalty",
               "Collisions with pedestrians", "Collisions with vehicles", "Collisions with layout",
@@ -319,7 +322,7 @@ _LB_LABELS = ["Avg. driving score", "Avg. route completion", "Avg. infraction pe
 
 def _lb_record(r: EpisodeRecord, index: int) -> dict:
     infr: dict[str, list[str]] = {k: [] for k in LB_INFRACTIONS}
-    if r.status == "crashed":
+    if r.status == EpisodeStatus.CRASHED:
         status = "Failed - Agent crashed" if "agent" in r.message.lower() else "Failed - Simulation crashed"
     else:
         status, key, msg = _LB_TERMINATION.get(r.termination, (f"Failed - {r.termination}", None, ""))
@@ -356,7 +359,7 @@ def leaderboard_checkpoint(records: Iterable[EpisodeRecord], agent: str, family:
     mine = sorted((r for r in records if r.agent == agent and r.family == family),
                   key=lambda r: (r.route_id, r.k, r.seed))
     recs = [_lb_record(r, i) for i, r in enumerate(mine)]
-    ok = [(r, rec) for r, rec in zip(mine, recs) if r.status != "crashed"]
+    ok = [(r, rec) for r, rec in zip(mine, recs) if r.status != EpisodeStatus.CRASHED]
     km = max(sum(r.length for r, _ in ok) / 1000.0, 0.001)
     n = len(ok)
     infr = {k: round(sum(len(rec["infractions"][k]) for _, rec in ok) / km, 6) for k in LB_INFRACTIONS}
