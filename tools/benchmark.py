@@ -94,7 +94,7 @@ from icrsumo.instructions.store import read_instruction_sets, route_document  # 
 from icrsumo.networks import load_net  # noqa: E402
 from icrsumo.resources import bundled_suites  # noqa: E402
 from icrsumo.scenario import find_scenarios, read_scenario  # noqa: E402
-from icrsumo.sim.backend import CONTEXT_RADIUS, EGO_ID, SumoSession, sumo_constants  # noqa: E402
+from icrsumo.sim.backend import EGO_ID, SumoBackend, SumoSession, add_ego  # noqa: E402
 from icrsumo.sim.callbacks import LoopTimer, LoopTimings  # noqa: E402
 from icrsumo.sim.episode import RunOptions, run_episode  # noqa: E402
 
@@ -167,20 +167,13 @@ class ReplayAgent:
         return a
 
 
-def _add_ego(ls, sc) -> None:
-    """Insert the ego as the runner does: same route, depart lane, position and speed."""
-    lane_index = sc.start_lane.rsplit("_", 1)[1]
-    ls.vehicle.add(EGO_ID, "ego_route", typeID="ego", depart="now", departLane=lane_index,
-                   departPos=f"{sc.start_pos:.2f}", departSpeed="0")
-
-
 def bare_sumo(sc, n_steps: int) -> tuple[float, float]:
     """(setup s: start + warm-up, s per step) of SUMO alone, ego driven by SUMO."""
     t0 = time.perf_counter()
     with SumoSession(sc) as sim:
         ls = sim.ls
         sim.run_until(sc.ego_depart)
-        _add_ego(ls, sc)
+        add_ego(ls, sc)  # as the loop inserts it: same route, depart lane, position and speed
         step = ls.simulationStep
         t1 = time.perf_counter()
         for _ in range(n_steps):
@@ -190,26 +183,15 @@ def bare_sumo(sc, n_steps: int) -> tuple[float, float]:
 
 
 def sumo_moved_ego(sc, log, length: float) -> float:
-    """s per step of SUMO with the ego moved along ``log``'s trajectory by moveToXY, with the
-    runner's subscriptions."""
-    tc = sumo_constants()
+    """s per step of SUMO with the ego moved along ``log``'s trajectory by moveToXY, inserted and
+    subscribed as the loop does (the backend's own setup), stepped on raw libsumo."""
     poses = [(x + 0.5 * length * math.cos(h), y + 0.5 * length * math.sin(h), 90.0 - math.degrees(h))
              for x, y, h in zip(log.x, log.y, log.yaw)]
-    with SumoSession(sc) as sim:
-        ls = sim.ls
-        sim.run_until(sc.ego_depart)
-        _add_ego(ls, sc)
-        ls.vehicle.setSpeedMode(EGO_ID, 0)
-        ls.vehicle.setLaneChangeMode(EGO_ID, 0)
-        sx, sy, sh = sc.start
-        ls.vehicle.moveToXY(EGO_ID, "", -1, sx, sy, 90.0 - math.degrees(sh), 2)
-        ls.simulationStep()
-        ls.vehicle.subscribe(EGO_ID, [tc.VAR_LANE_ID, tc.VAR_LANEPOSITION])
-        ls.vehicle.subscribeContext(EGO_ID, tc.CMD_GET_VEHICLE_VARIABLE, CONTEXT_RADIUS,
-                                    [tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_LENGTH, tc.VAR_WIDTH])
-        ls.vehicle.subscribeContext(EGO_ID, tc.CMD_GET_PERSON_VARIABLE, CONTEXT_RADIUS, [tc.VAR_POSITION])
-        for tl in ls.trafficlight.getIDList():
-            ls.trafficlight.subscribe(tl, [tc.TL_RED_YELLOW_GREEN_STATE])
+    with SumoBackend(sc) as backend:
+        backend.start()
+        backend.run_until(sc.ego_depart)
+        backend.insert_ego(*sc.start)
+        ls = backend.session.ls
         move, step = ls.vehicle.moveToXY, ls.simulationStep
         t1 = time.perf_counter()
         for fx, fy, a in poses[1:]:

@@ -92,13 +92,14 @@ def roadside_causes(old: Path, res: dict) -> list[dict]:
     import math
 
     import numpy as np
+    import shapely
     from shapely.geometry import Point
 
     from icrsumo.dynamics import EgoState
     from icrsumo.networks import load_net
     from icrsumo.render import BevRenderer, BevSpec
     from icrsumo.scenario import find_scenarios, read_scenario
-    from icrsumo.sim.drivable import DrivableArea, _polygonal, drivable_area
+    from icrsumo.sim.drivable import DrivableArea, _polygonal, drivable_area, lane_polygons
     from icrsumo.sim.sensors import footprint_corners
 
     scenarios = {sc.route_id: sc for sc in (read_scenario(d) for d in find_scenarios(old / "scenarios"))}
@@ -110,7 +111,7 @@ def roadside_causes(old: Path, res: dict) -> list[dict]:
         sc = scenarios[key[1]]
         if sc.route_id not in cache:
             net = load_net(sc.net)
-            lanes_only = DrivableArea(_polygonal(_lane_union(net)))
+            lanes_only = DrivableArea(_polygonal(shapely.union_all(lane_polygons(net))))
             cache[sc.route_id] = (BevRenderer(net, BevSpec()), drivable_area(net), lanes_only)
         raster, area, lanes_only = cache[sc.route_id]
         size = (float(sc.manifest["ego"]["length"]), float(sc.manifest["ego"]["width"]))
@@ -147,19 +148,6 @@ def roadside_causes(old: Path, res: dict) -> list[dict]:
                             "max_off_m": round(off_d, 3) if math.isfinite(off_d) else None,
                             "second_off_m": round(second, 3)})
     return out
-
-
-def _lane_union(net):
-    import shapely
-    from shapely.geometry import LineString
-
-    from icrsumo.sim.drivable import MITRE_LIMIT
-
-    sn = net.sumolib_net
-    return shapely.union_all([
-        LineString(net.lane_shape[lid]).buffer(float(sn.getLane(lid).getWidth()) / 2.0, cap_style="flat",
-                                               join_style="mitre", mitre_limit=MITRE_LIMIT)
-        for lid in sorted(net.lane_shape) if len(net.lane_shape[lid]) >= 2])
 
 
 def _fmt_events(events: list) -> str:

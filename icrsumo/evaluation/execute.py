@@ -1,5 +1,5 @@
 """Running one episode job in a worker: the agent's calls guarded by a
-:class:`~icrsumo.evaluation.watch.CallWatch`, the episode scored, and a typed :class:`Outcome`
+:class:`~icrsumo.agents.watch.CallWatch`, the episode scored, and a typed :class:`Outcome`
 returned (never an exception): done with its record and log, crashed with an
 :class:`~icrsumo.vocab.ErrorKind` and a one-line message, or timed out."""
 
@@ -15,7 +15,8 @@ from ..agents.base import Agent, AgentTimeout
 from ..agents.registry import agent_factory
 from ..agents.watch import CallWatch, Unwatched
 from ..errors import describe
-from ..types import EpisodeRecord
+from ..scenario import Scenario
+from ..types import EpisodeRecord, InstructionSet
 from ..vocab import EpisodeStatus, ErrorKind, OutcomeStatus
 from .plan import Job
 
@@ -79,12 +80,29 @@ class WatchedAgent:
 class EpisodeWorker:
     """Runs jobs one at a time in one process, with its agents' calls under ``watch``. Keeps
     the agent factory of each spec (or each job factory) it has met, so user code is imported
-    and remote agents are asked for their name once per process; :meth:`close` closes the
+    and remote agents are asked for their name once per process, and each scenario and
+    instruction file it has read (a route's 33 sequences are 33 jobs); :meth:`close` closes the
     factories that hold connections."""
 
     def __init__(self, watch: CallWatch | None = None) -> None:
         self.watch: CallWatch = watch if watch is not None else Unwatched()
         self.factories: dict[Hashable, Callable[[], Agent]] = {}
+        self._scenarios: dict[str, Scenario] = {}
+        self._sets: dict[str, dict[tuple[str, int], InstructionSet]] = {}
+
+    def _inputs(self, job: Job) -> tuple[Scenario, InstructionSet]:
+        """The job's scenario and instruction sequence (each file read once per worker)."""
+        from ..instructions.store import read_instruction_sets
+        from ..scenario import read_scenario
+
+        sc = self._scenarios.get(job.scenario)
+        if sc is None:
+            sc = self._scenarios[job.scenario] = read_scenario(Path(job.scenario))
+        sets = self._sets.get(job.instructions)
+        if sets is None:
+            sets = self._sets[job.instructions] = {
+                (s.family, s.k): s for s in read_instruction_sets(Path(job.instructions))}
+        return sc, sets[(job.family, job.k)]
 
     def factory(self, job: Job) -> Callable[[], Agent]:
         ref: Hashable = job.factory if job.factory is not None else (job.agent_spec, job.device)
@@ -96,20 +114,16 @@ class EpisodeWorker:
 
     def run(self, job: Job) -> Outcome:
         """Run one episode and score it; every failure becomes an Outcome."""
-        from ..instructions.store import read_instruction_sets
         from ..logs import dumps_log
         from ..metrics import score_episode
-        from ..scenario import read_scenario
         from ..sim.episode import run_episode
 
         try:
             factory = self.factory(job)
-            sc = read_scenario(Path(job.scenario))
-            sets = [s for s in read_instruction_sets(Path(job.instructions))
-                    if s.family == job.family and s.k == job.k]
+            sc, iset = self._inputs(job)
             agent = WatchedAgent(factory(), self.watch)
             try:
-                log = run_episode(sc, sets[0], agent)
+                log = run_episode(sc, iset, agent)
             finally:
                 agent.close()  # the optional close() hook: e.g. a remote agent ends its session
             r = score_episode(log)

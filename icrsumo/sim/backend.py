@@ -64,6 +64,14 @@ def _translated():
         raise
 
 
+def add_ego(ls, scenario: Scenario) -> None:
+    """Add the ego to a running simulation ``ls`` now: on ``ego_route`` at the scenario's start
+    lane and position, standing (SUMO inserts it when the spot is free)."""
+    lane_index = scenario.start_lane.rsplit("_", 1)[1]
+    ls.vehicle.add(EGO_ID, "ego_route", typeID="ego", depart="now", departLane=lane_index,
+                   departPos=f"{scenario.start_pos:.2f}", departSpeed="0")
+
+
 class SumoSession:
     """One SUMO run of a scenario: ``with SumoSession(sc) as s: s.step()``.
 
@@ -120,12 +128,7 @@ class SumoSession:
         """Insert the ego at its start lane position on ``ego_route`` at the current time and
         step until SUMO has placed it (insertion waits while the spot is occupied, at most
         ``max_wait`` s). Returns whether the ego is in the simulation."""
-        sc = self.scenario
-        lane_index = sc.start_lane.rsplit("_", 1)[1]
-        self.ls.vehicle.add(
-            EGO_ID, "ego_route", typeID="ego", depart="now", departLane=lane_index,
-            departPos=f"{sc.start_pos:.2f}", departSpeed="0",
-        )
+        add_ego(self.ls, self.scenario)
         deadline = self.time + max_wait
         while self.time < deadline:
             self.ls.simulationStep()
@@ -170,6 +173,12 @@ class SumoBackend:
             session.close()
 
     @property
+    def session(self) -> SumoSession | None:
+        """The underlying session (None before ``start()`` and after ``close()``): raw libsumo
+        for measurements (``tools/benchmark.py``)."""
+        return self._session
+
+    @property
     def time(self) -> float:
         """Current simulation time (s)."""
         with _translated():
@@ -191,12 +200,10 @@ class SumoBackend:
     def insert_ego(self, x: float, y: float, yaw: float) -> None:
         """Add the ego on the scenario's start lane, place its front bumper at (x, y) m heading
         ``yaw`` rad, take one step and subscribe to what :meth:`read` needs."""
-        sc, tc = self.scenario, self._tc
+        tc = self._tc
         with _translated():
             ls = self._session.ls
-            lane_index = sc.start_lane.rsplit("_", 1)[1]
-            ls.vehicle.add(EGO_ID, "ego_route", typeID="ego", depart="now", departLane=lane_index,
-                           departPos=f"{sc.start_pos:.2f}", departSpeed="0")
+            add_ego(ls, self.scenario)
             ls.vehicle.setSpeedMode(EGO_ID, 0)
             ls.vehicle.setLaneChangeMode(EGO_ID, 0)
             ls.vehicle.moveToXY(EGO_ID, "", -1, x, y, 90.0 - math.degrees(yaw), 2)

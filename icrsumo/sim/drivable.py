@@ -69,14 +69,7 @@ class DrivableArea:
     @classmethod
     def from_net(cls, net: RoadNet) -> DrivableArea:
         sn = net.sumolib_net
-        lanes = []
-        for lid in sorted(net.lane_shape):
-            shape = net.lane_shape[lid]
-            if len(shape) < 2:
-                continue
-            half = float(sn.getLane(lid).getWidth()) / 2.0
-            lanes.append(LineString(shape).buffer(half, cap_style="flat", join_style="mitre",
-                                                  mitre_limit=MITRE_LIMIT))
+        lanes = lane_polygons(net)
         car_nodes = set()
         for eid in net.passenger_lanes:
             edge = sn.getEdge(eid)
@@ -98,9 +91,10 @@ class DrivableArea:
 
     def contains(self, x: float, y: float) -> bool:
         """Whether the point (x, y) m is drivable (a non-finite point is not)."""
-        if not (math.isfinite(x) and math.isfinite(y)):
+        try:
+            key = (math.floor(x / CELL_M), math.floor(y / CELL_M))
+        except (ValueError, OverflowError):  # NaN, inf
             return False
-        key = (math.floor(x / CELL_M), math.floor(y / CELL_M))
         got = self._cells.get(key)
         if got is None:
             got = self._cell(key)
@@ -118,22 +112,18 @@ class DrivableArea:
         return out
 
     def count_off(self, points: Iterable[tuple[float, float]]) -> int:
-        """How many of ``points`` ((x, y) m each) are off the drivable area: :meth:`contains` of
-        each, with the cell lookup inlined (the loop asks this for four corners every step)."""
-        cells, n = self._cells, 0
-        for x, y in points:
-            try:
-                key = (math.floor(x / CELL_M), math.floor(y / CELL_M))
-            except (ValueError, OverflowError):  # NaN, inf: not drivable
-                n += 1
-                continue
-            got = cells.get(key)
-            if got is None:
-                got = self._cell(key)
-            if got == 2:
-                got = 1 if shapely.intersects_xy(self.geometry, x, y) else 0
-            n += got == 0
-        return n
+        """How many of ``points`` ((x, y) m each) are off the drivable area."""
+        contains = self.contains
+        return sum(1 for x, y in points if not contains(x, y))
+
+
+def lane_polygons(net: RoadNet) -> list:
+    """Every passenger lane's outline: its centre line widened by half its width to each side,
+    flat at the ends, mitred at the bends (shapely Polygons, sorted by lane id)."""
+    sn = net.sumolib_net
+    return [LineString(net.lane_shape[lid]).buffer(float(sn.getLane(lid).getWidth()) / 2.0, cap_style="flat",
+                                                   join_style="mitre", mitre_limit=MITRE_LIMIT)
+            for lid in sorted(net.lane_shape) if len(net.lane_shape[lid]) >= 2]
 
 
 @lru_cache(maxsize=16)
