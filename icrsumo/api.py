@@ -64,7 +64,9 @@ def evaluate(suite: str | Path = "tiny", agents: str | Sequence[str] | None = No
     cores); ``quiet``: no progress bar and no table on the terminal. ``more``: the other fields
     of :class:`icrsumo.evaluation.EvalOptions`: ``routes`` (route ids), ``backend`` (local,
     ray), ``address``, ``traffic``, ``rollout_route``, ``agent_timeout`` (s, None: no limit),
-    ``batch_inference`` (a device), ``max_batch``, ``inference_processes``, ``agent_device``.
+    ``batch_inference`` (a device), ``max_batch``, ``inference_processes``, ``agent_device``,
+    ``baseline_bank`` (LMDrive's instruction dictionary: LangAuto's own baseline wording, part
+    of the folder's configuration).
 
     Returns an :class:`icrsumo.evaluation.EvalResult`: ``summary`` (OUT/summary.json),
     ``out``, the episode counts and the batched-inference statistics. Raises
@@ -117,11 +119,13 @@ class Suite:
 
 
 def load_suite(suite: str | Path = "tiny", out: str | Path = "icr_out", *, k: int = 8, seed: int = 2026,
-               traffic: str = "normal", workers: int | None = None) -> Suite:
+               traffic: str = "normal", workers: int | None = None,
+               baseline_bank: str | Path | None = None) -> Suite:
     """Convert ``suite`` into ``out`` and generate its instructions, as ``evaluate`` does.
 
     ``suite``: tiny, short, long, a route XML file or a convert-routes folder (used as it is);
-    ``k`` variants per family with ``seed``, ``traffic`` and ``workers`` as in :func:`evaluate`.
+    ``k`` variants per family with ``seed``, ``traffic``, ``workers`` and ``baseline_bank`` as
+    in :func:`evaluate`.
     Whatever is in ``out`` already is reused, and ``out/config.json`` is written, so an
     :func:`evaluate` into the same ``out`` with the same suite, k, seed and traffic reuses it
     (an InputError when ``out`` holds another configuration). Returns a :class:`Suite`.
@@ -131,7 +135,8 @@ def load_suite(suite: str | Path = "tiny", out: str | Path = "icr_out", *, k: in
     from .instructions.store import read_instruction_sets
     from .scenario import find_scenarios, read_scenario
 
-    opts = _options(out, suite, k=k, seed=seed, traffic=traffic, workers=workers, quiet=True)
+    opts = _options(out, suite, k=k, seed=seed, traffic=traffic, workers=workers, quiet=True,
+                    baseline_bank=baseline_bank)
     opts.check()
     prep = plan.prepare_suite(opts)
     written = set(prep.routes)

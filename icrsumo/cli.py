@@ -54,8 +54,14 @@ def _cmd_generate(args: argparse.Namespace) -> int:
         llm = LLMConfig(endpoint=args.endpoint, model=args.model,
                         cache_dir=Path(args.cache or Path(args.out) / "llm_cache"),
                         api_key=os.environ.get("ICRSUMO_LLM_API_KEY"))
+    bank = None
+    if args.baseline_bank is not None:
+        from .instructions.baseline_bank import load_baseline_bank
+
+        bank = load_baseline_bank(args.baseline_bank)
+        _note_set_aside(bank)
     opts = GenerateOptions(families=families, k=args.k, seed=args.seed, templates=args.templates,
-                           workers=args.workers, llm=llm)
+                           workers=args.workers, llm=llm, baseline_bank=bank)
     t0 = time.perf_counter()
     written, failures = generate(Path(args.scenarios), Path(args.out), opts)
     print(f"{len(written)} routes x (1 + {len(families)} x {args.k}) sequences, {len(failures)} failed "
@@ -63,6 +69,14 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     for line in failures:
         print(line, file=sys.stderr)
     return 2 if failures else 0
+
+
+def _note_set_aside(bank) -> None:
+    """One stderr line when phrasings of a --baseline-bank file are not used."""
+    if bank.set_aside:
+        n = len(bank.set_aside)
+        print(f"icrsumo: note: {bank.path}: {n} phrasing{'s' if n > 1 else ''} set aside, read as another "
+              f"maneuver (first: {bank.set_aside[0].line()})", file=sys.stderr)
 
 
 def _cmd_run_episode(args: argparse.Namespace) -> int:
@@ -108,7 +122,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         routes=_split_list(args.routes) or None, backend=args.backend, address=args.address,
         traffic=args.traffic, rollout_route=args.rollout_route, agent_timeout=args.agent_timeout or None,
         batch_inference=args.batch_inference, max_batch=args.max_batch,
-        inference_processes=args.inference_processes,
+        inference_processes=args.inference_processes, baseline_bank=args.baseline_bank,
     )
     print(f"{result.done} episodes done, {result.crashed} crashed, {time.perf_counter() - t0:.0f} s -> "
           f"{args.out}", file=sys.stderr)
@@ -181,11 +195,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser(
         "convert-routes", help="leaderboard route XML -> runnable SUMO scenarios",
-        description="Convert a leaderboard-style route file (or a bundled split: tiny, short, "
-        "long, train) into SUMO scenarios with background traffic.",
+        description="Convert a leaderboard-style route file (or a bundled suite: tiny, short, "
+        "long, train, langauto-tiny, langauto-short, langauto-long, carla-train) into SUMO "
+        "scenarios with background traffic.",
     )
     p.add_argument("routes", help="route XML file, or the name of a bundled suite (tiny, short, long, "
-                                  "train, langauto-tiny, langauto-short, langauto-long)")
+                                  "train, langauto-tiny, langauto-short, langauto-long, carla-train)")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--net", type=Path, help="use this .net.xml for every route")
     p.add_argument("--xodr", type=Path, help="convert this OpenDRIVE file (cached) for every route")
@@ -193,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="folder with <town>.net.xml or <town>.xodr per route town")
     p.add_argument("--coords", choices=["sumo", "carla"], default=None,
                    help="waypoint frame: sumo (default) or CARLA's left-handed frame (a bundled "
-                        "suite's own frame by default: carla for the langauto-* suites)")
+                        "suite's own frame by default: carla for langauto-* and carla-train)")
     p.add_argument("--traffic", choices=["none", "light", "normal", "dense"], default="normal")
     p.add_argument("--max-snap", type=float, default=10.0,
                    help="farthest a waypoint may lie from a drivable lane (m, default 10)")
@@ -217,6 +232,10 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--k", type=int, default=8, help="variants per family (default 8)")
     g.add_argument("--seed", type=int, default=2026, help="seed of all draws (default 2026)")
     g.add_argument("--templates", type=Path, help="folder with your own template banks")
+    g.add_argument("--baseline-bank", type=Path, metavar="FILE",
+                   help="LangAuto's own baseline wording: LMDrive's instruction dictionary (JSON: "
+                   "instruction-type id \"0\"..\"64\" -> phrasings with [x]/[y]); its phrasings replace "
+                   "icrsumo's for the types they map (see the README)")
     g.add_argument("--generator", choices=["templates", "llm"], default="templates")
     g.add_argument("--endpoint", help="OpenAI-compatible base URL, e.g. http://127.0.0.1:8000/v1")
     g.add_argument("--model", help="model name for --generator llm")
@@ -265,6 +284,9 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--traffic", choices=["none", "light", "normal", "dense"], default="normal")
     v.add_argument("--out", default="icr_out", help="output folder (default icr_out)")
     v.add_argument("--rollout-route", help="route of the paired rollout figure (default: the first)")
+    v.add_argument("--baseline-bank", type=Path, metavar="FILE",
+                   help="LangAuto's own baseline wording: LMDrive's instruction dictionary; part of the "
+                   "out folder's configuration (its SHA-256)")
     v.add_argument("--quiet", action="store_true", help="no progress bar or table")
     v.add_argument("--batch-inference", metavar="DEVICE",
                    help="run each non-privileged agent in one inference process on DEVICE (cuda, cpu, "
@@ -316,12 +338,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser(
         "collect", help="expert driving data (BEV, speed, instruction, expert plan) for training",
-        description="Drive the train split (never an evaluation split) with the route-oracle as "
-        "expert, with perturbed passes for recovery data; store bit-packed rasters and labels per "
-        "episode (resumable).",
+        description="Drive the train split (or carla-train on CARLA's towns; never an evaluation "
+        "suite) with the route-oracle as expert, with perturbed passes for recovery data; store "
+        "bit-packed rasters and labels per episode (resumable).",
     )
     c.add_argument("--out", required=True, help="output folder")
-    c.add_argument("--suite", default="train", help="train (default), a route XML or a convert-routes folder")
+    c.add_argument("--suite", default="train",
+                   help="train (default), carla-train, a route XML or a convert-routes folder")
     c.add_argument("--passes", type=int, default=3, help="passes per route; pass 0 clean, others perturbed")
     c.add_argument("--seed", type=int, default=0, help="seed of phrasings and perturbations")
     c.add_argument("--every", type=int, default=2, help="store every n-th agent step (default 2: 5 Hz)")

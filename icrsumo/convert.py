@@ -168,6 +168,9 @@ def _source_hash(spec: RouteSpec, net_sha: str, opts: ConvertOptions) -> str:
 
 
 def _sumocfg(net_rel: str, route_files: list[str], seed: int, end: float) -> str:
+    # collision.mingap-factor 0: a collision is a contact (gap < 0); SUMO's default also counts a
+    # same-lane gap below the follower's minGap (2.5 m), which is no contact (see README,
+    # *Fidelity on CARLA's towns*)
     files = ",".join(route_files)
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <configuration>
@@ -183,6 +186,7 @@ def _sumocfg(net_rel: str, route_files: list[str], seed: int, end: float) -> str
     <processing>
         <collision.action value="warn"/>
         <collision.check-junctions value="true"/>
+        <collision.mingap-factor value="0"/>
         <time-to-teleport value="300"/>
     </processing>
     <random_number>

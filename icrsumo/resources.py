@@ -31,8 +31,9 @@ def bundled_towns() -> dict[str, Path]:
 
 def bundled_suites() -> dict[str, Path]:
     """Bundled route suite name -> its route XML path: icrsumo's splits (tiny, short, long,
-    train: ``routes/``) and LangAuto's tracks (langauto-tiny, langauto-short, langauto-long:
-    ``routes/langauto/``)."""
+    train: ``routes/``), LangAuto's tracks (langauto-tiny, langauto-short, langauto-long:
+    ``routes/langauto/``) and icrsumo's training routes on CARLA's towns (carla-train:
+    ``routes/carla-train/``)."""
     root = data_dir("routes")
     files = sorted(root.glob("*.xml")) + sorted(root.glob("*/*.xml"))
     return {p.stem: p for p in files}

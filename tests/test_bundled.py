@@ -81,9 +81,9 @@ def test_towns_cover_langauto_features():
         assert set(reach) | {start} == set(n.passenger_lanes), t
 
 
-@pytest.mark.parametrize("tool", ["make_networks.py", "make_routes.py"])
-def test_tools_regenerate_byte_identical(tmp_path, tool):
-    folder = "networks" if tool == "make_networks.py" else "routes"
+@pytest.mark.parametrize(("tool", "folder"), [("make_networks.py", "networks"), ("make_routes.py", "routes"),
+                                              ("make_carla_routes.py", "routes/carla-train")])
+def test_tools_regenerate_byte_identical(tmp_path, tool, folder):
     subprocess.run([sys.executable, str(ROOT / "tools" / tool), "--out", str(tmp_path)],
                    check=True, capture_output=True, timeout=600)
     theirs = sorted(p.name for p in (ROOT / folder).iterdir() if p.is_file())  # subfolders: other tools

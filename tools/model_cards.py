@@ -2,6 +2,9 @@
 its training config and the ``summary.json`` of an ``icrsumo evaluate`` run.
 
     python tools/model_cards.py SUMMARY.json [--train-seconds NAME=S ...] [--eval-command CMD]
+                                [--extra "LABEL=SUMMARY.json=COMMAND" ...]
+
+``--extra`` adds a measured table per further evaluation (e.g. on LangAuto's tracks).
 """
 
 from __future__ import annotations
@@ -29,14 +32,27 @@ def _row(name: str, fam: str, r: dict) -> str:
     return f"| {fam} | {r['DS']:.1f} | {r['RC']:.1f} | {r['IS']:.3f} | {d} | {100 * r['RD']:.0f}% |"
 
 
-def card(name: str, summary: dict, train_s: str, eval_cmd: str) -> str:
+def _table(name: str, title: str, summary: dict, eval_cmd: str) -> list[str]:
+    res = summary["agents"].get(name)
+    if not res:
+        return []
+    lines = [
+        f"## Measured evaluation ({title})", "",
+        f"`{eval_cmd}` (seed {summary['seed']}, K = {summary['k']}):", "",
+        "| Instructions | DS | RC | IS | ΔDS [95% CI] | RD |", "|---|---|---|---|---|---|",
+        _row(name, "baseline", {**res["baseline"], "dDS": 0.0, "dDS_ci95": None}),
+    ]
+    return lines + [_row(name, fam, r) for fam, r in res["families"].items()] + [""]
+
+
+def card(name: str, summary: dict, train_s: str, eval_cmd: str,
+         extra: list[tuple[str, dict, str]] = ()) -> str:
     ck = torch.load(CHECKPOINTS / f"{name}.pt", weights_only=True)
     cfg = tomllib.loads((CHECKPOINTS / f"{name}.toml").read_text())
     meta = ck["meta"]
     n_par = sum(v.numel() for v in ck["model"].values())
     size = (CHECKPOINTS / f"{name}.pt").stat().st_size / 2**20
     val = meta.get("final", {}).get("val", {})
-    res = summary["agents"].get(name)
     lines = [
         f"# `{name}` model card", "",
         f"`icrsumo evaluate --agent {name}`. A learned, non-privileged agent: it sees the BEV raster "
@@ -51,33 +67,31 @@ def card(name: str, summary: dict, train_s: str, eval_cmd: str) -> str:
         f"- {n_par:,} parameters, {size:.1f} MB (float32), loaded with "
         "`torch.load(..., weights_only=True)`.", "",
         "## Data and training", "",
-        "- Data: `icrsumo collect --out DATA` (defaults: the bundled `train` split, 272 routes that "
-        "share no edge sequence with the evaluation splits; 3 passes per route, pass 0 clean and "
-        "passes 1-2 with perturbations for recovery; route-oracle expert labels; 5 Hz). "
-        f"{meta['frames']:,} training frames; the routes with `val_fraction` held out for validation.",
+        "- Data: `icrsumo collect --out DATA_TRAIN` (the bundled `train` split: 272 routes on "
+        "icrsumo's six towns that share no edge sequence with the evaluation splits) and "
+        "`icrsumo collect --suite carla-train --out DATA_CARLA` (128 routes on CARLA's eight "
+        "towns, none of which drives a whole LangAuto route); 3 passes per route, pass 0 clean and "
+        "passes 1-2 with perturbations for recovery; route-oracle expert labels (its final "
+        "standstill dropped where it got stuck); 5 Hz; 1,200 episodes, 457,539 frames. "
+        f"{meta['frames']:,} training frames; the routes with `val_fraction` held out for validation. "
+        "Neither LangAuto's evaluation routes nor the evaluation template banks are ever read.",
         "- Instructions: baseline phrasings only (baseline bank)"
         + (", plus paraphrase and noise variants from the training bank "
            "`icrsumo/learn/data/train_bank.json` (`--augment-instructions`)" if cfg["augment_instructions"]
            else "") + "; the evaluation banks are never read.",
         f"- Config: [`{name}.toml`]({name}.toml): {meta['steps']:,} steps, batch {cfg['batch']}, "
         f"AdamW, one-cycle lr {cfg['lr']}, seed {cfg['seed']}.",
-        f"- Command: `bash tools/train_shipped.sh OUT DATA` (runs `python -m icrsumo train "
-        f"icrsumo/learn/checkpoints/{name}.toml --data DATA --out OUT/{name}`), on one NVIDIA H100 "
-        f"(the `device` tool), three models at once; {train_s}.",
+        f"- Command: `bash tools/train_shipped.sh OUT DATA_CARLA DATA_TRAIN` (runs `python -m icrsumo "
+        f"train icrsumo/learn/checkpoints/{name}.toml --data DATA_CARLA --data DATA_TRAIN --out "
+        f"OUT/{name}`), on one NVIDIA H100 (the `device` tool), three models at once; {train_s}.",
         f"- Validation at the end: waypoint L1 {val.get('waypoints', float('nan')):.3f} m, last point "
         f"error {val.get('final_wp_err', float('nan')):.2f} m, target-speed L1 "
         f"{val.get('speed', float('nan')):.2f} m/s, stop accuracy {val.get('stop_acc', float('nan')):.3f}, "
         f"intent accuracy {val.get('intent_acc', float('nan')):.3f}.", "",
     ]
-    if res:
-        lines += [
-            "## Measured evaluation (bundled tiny suite, never trained on)", "",
-            f"`{eval_cmd}` (seed {summary['seed']}, K = {summary['k']}):", "",
-            "| Instructions | DS | RC | IS | ΔDS [95% CI] | RD |", "|---|---|---|---|---|---|",
-            _row(name, "baseline", {**res["baseline"], "dDS": 0.0, "dDS_ci95": None}),
-        ]
-        lines += [_row(name, fam, r) for fam, r in res["families"].items()]
-        lines.append("")
+    lines += _table(name, "bundled tiny suite, never trained on", summary, eval_cmd)
+    for label, extra_summary, cmd in extra:
+        lines += _table(name, label, extra_summary, cmd)
     return "\n".join(lines)
 
 
@@ -86,12 +100,17 @@ def main() -> None:
     ap.add_argument("summary", type=Path)
     ap.add_argument("--train-seconds", action="append", default=[], help="NAME=SECONDS")
     ap.add_argument("--eval-command", default="icrsumo evaluate --agent NAME")
+    ap.add_argument("--extra", action="append", default=[], help="LABEL=SUMMARY.json=COMMAND")
     args = ap.parse_args()
+    extra = []
+    for item in args.extra:
+        label, path, cmd = item.split("=", 2)
+        extra.append((label, json.loads(Path(path).read_text()), cmd))
     summary = json.loads(args.summary.read_text())
     secs = dict(s.split("=", 1) for s in args.train_seconds)
     for p in sorted(CHECKPOINTS.glob("*.pt")):
         t = f"{float(secs[p.stem]) / 60:.1f} min" if p.stem in secs else "time not recorded"
-        (CHECKPOINTS / f"{p.stem}.md").write_text(card(p.stem, summary, t, args.eval_command))
+        (CHECKPOINTS / f"{p.stem}.md").write_text(card(p.stem, summary, t, args.eval_command, extra))
         print(f"wrote {CHECKPOINTS / (p.stem + '.md')}")
 
 

@@ -27,6 +27,7 @@ from ..instructions.intent import classify_intent
 from ..networks import Connection, RoadNet, load_net
 from ..types import Intent
 from .base import Action, EpisodeInfo, Observation, World
+from .conflicts import Conflict, ConflictMap, project
 
 COMFORT_DECEL = 3.0      # m/s^2 used to plan stops
 LAT_ACCEL = 2.0          # m/s^2 allowed in curves
@@ -36,6 +37,17 @@ HORIZON = 70.0           # m of path planned ahead
 CORRIDOR = 2.0           # m lateral half-width in which an object is "on the path"
 STOP_SIGN_WAIT = 1.0     # s stopped at a stop sign before going on
 CRUISE_FACTOR = 0.9      # fraction of the speed limit driven
+LANE_CHANGE_M = 20.0     # m of road over which one lane is changed (less where the edge is short)
+WAIT_BEFORE_END = 12.0   # m before an edge's end where the ego waits for a gap to change lanes
+YIELD_LOOKAHEAD = 60.0   # m ahead within which junction entries are checked for traffic to yield to
+YIELD_APPROACH = 35.0    # m from a conflict point within which a vehicle with the right of way is waited for
+CONFLICT_CLEAR = 3.0     # m before a conflict point where the ego's front stops
+MERGE_MARGIN = 3.0       # m: a vehicle this much farther from a merge than the ego still goes first
+MOVING = 0.5             # m/s above which another vehicle counts as moving
+YIELD_TIME = 4.0         # s from a conflict point within which a vehicle with the right of way is waited for
+UNSEEN_SPEED = 15.0      # m/s assumed for a vehicle not seen at the previous call
+MINOR_ENTRY_SPEED = 6.0  # m/s at most when entering a junction on a minor link (g, m)
+YIELD_MARGIN = 2.0       # s the ego keeps between clearing a conflict point and a rival reaching it
 
 
 @dataclass
@@ -44,6 +56,8 @@ class _Piece:
     a: float
     b: float
     conn: Connection | None = None   # the connection this piece leads into (set on its last normal piece)
+    enter: Connection | None = None  # the connection whose internal lanes begin here (junction entry)
+    entered: float = 0.0             # m of ``enter``'s internal lanes already behind this piece's start
 
 
 @dataclass
@@ -52,6 +66,8 @@ class _Path:
     cum: np.ndarray                          # (N,) arc length m
     speed: np.ndarray                        # (N,) speed limit m/s
     stops: list[tuple[float, Connection]] = field(default_factory=list)   # (s of stop line, conn)
+    hold: float = math.inf                   # s (m) where the ego must stop: no way on from its lane yet
+    junctions: list[tuple[float, Connection]] = field(default_factory=list)  # (s of junction entry, conn)
 
 
 def _lane_edge(lane: str) -> str:
@@ -75,6 +91,12 @@ class PathDriver(ABC):
         self._stopped_at: dict[str, float] = {}
         self._cleared: set[str] = set()
         self._edge = ""
+        # the lane change in progress: (edge, target lane index, lane position where it ends, m)
+        self._change: tuple[str, int, float] | None = None
+        self._conflict_map: ConflictMap | None = None
+        # other vehicles' speeds (m/s), estimated from their positions at the previous call
+        self._seen: tuple[float, np.ndarray] | None = None
+        self._speeds = np.zeros(0)
 
     # ----------------------------------------------------------------- protocol
     def reset(self, info: EpisodeInfo) -> None:
@@ -83,11 +105,15 @@ class PathDriver(ABC):
         self._stopped_at.clear()
         self._cleared.clear()
         self._edge = ""
+        self._change = None
+        self._seen = None
+        self._speeds = np.zeros(0)
 
     def act(self, obs: Observation) -> Action:
         w = obs.world
         assert w is not None, "privileged agent without a World view"
         self.observe(obs)
+        self._track(obs.t, w.vehicles)
         lane, pos = self._locate(w)
         if not lane:
             return Action(waypoints=np.array([[2.0, 0.0], [4.0, 0.0]]), target_speed=0.0)
@@ -106,6 +132,22 @@ class PathDriver(ABC):
     def preferred_lane(self, w: World, edge: str, lanes: tuple[int, ...], current: int) -> int:
         """Lane index to drive on ``edge`` when the next edge allows several."""
         return current if current in lanes else min(lanes, key=lambda i: (abs(i - current), i))
+
+    def _track(self, t: float, vehicles: np.ndarray) -> None:
+        """Estimate each vehicle's speed (m/s) from the nearest position seen at the previous
+        call (vehicles carry no ids here; between calls 0.1 s apart they move far less than
+        they stand apart); NaN for a vehicle with no neighbour within 3 m then."""
+        xy = vehicles[:, :2] if len(vehicles) else np.zeros((0, 2))
+        speeds = np.full(len(xy), np.nan)
+        if self._seen is not None and len(xy) and len(self._seen[1]):
+            dt = t - self._seen[0]
+            if dt > 0:
+                prev = self._seen[1]
+                d = xy[:, None, :] - prev[None, :, :]
+                near = np.hypot(d[..., 0], d[..., 1]).min(axis=1)
+                speeds = np.where(near < 3.0, near / dt, np.nan)
+        self._seen = (t, xy.copy())
+        self._speeds = speeds
 
     # ----------------------------------------------------------------- planning
     def _locate(self, w: World) -> tuple[str, float]:
@@ -154,8 +196,10 @@ class PathDriver(ABC):
             conn = next((c for c in net.connections.get((src, dst), ()) if lane in c.via_chain), None)
             if conn is None:
                 return self._make_path([_Piece(lane, pos, net.lane_length[lane])], w)
-            chain = conn.via_chain[conn.via_chain.index(lane):]
-            pieces.append(_Piece(chain[0], pos, net.lane_length[chain[0]]))
+            k = conn.via_chain.index(lane)
+            chain = conn.via_chain[k:]
+            behind = sum(net.lane_length[v] for v in conn.via_chain[:k]) + pos
+            pieces.append(_Piece(chain[0], pos, net.lane_length[chain[0]], enter=conn, entered=behind))
             pieces += [_Piece(v, 0.0, net.lane_length[v]) for v in chain[1:]]
             total = sum(p.b - p.a for p in pieces)
             edge, cur, start = dst, conn.to_lane, 0.0
@@ -164,7 +208,9 @@ class PathDriver(ABC):
             if edge != self._edge:
                 self._decided = {k: v for k, v in self._decided.items() if k != self._edge}
                 self._edge = edge
+                self._change = None
         first = True
+        hold = math.inf
         while total < HORIZON and edge in net.passenger_lanes:
             length = net.edge_length[edge]
             options = self._options(edge)
@@ -177,19 +223,24 @@ class PathDriver(ABC):
             if nxt is None or (edge, nxt) not in net.connections:
                 pieces.append(_Piece(f"{edge}_{cur}", start, length))
                 break
-            conns = net.connections[(edge, nxt)]
+            conns = self._onward(w, edge, nxt)
             allowed = tuple(sorted({c.from_lane for c in conns}))
             want = self.preferred_lane(w, edge, allowed, cur) if first else \
                 min(allowed, key=lambda i: (abs(i - cur), i))
-            if want != cur and first and not self._lane_free(w, edge, want, start):
-                want = cur  # wait for a gap; the lane end acts as a stop point below
             if want != cur:
-                shift = float(np.clip(length - start - 5.0, 3.0, 20.0))
+                step = 1 if want > cur else -1
+                committed = first and self._change is not None and self._change[:2] == (edge, cur + step)
+                if first and not committed and not self._lane_free(w, edge, cur + step, start):
+                    # wait for a gap: no way on from this lane, so stop where the change still fits
+                    pieces.append(_Piece(f"{edge}_{cur}", start, length))
+                    hold = total + max(0.0, length - start - WAIT_BEFORE_END)
+                    break
+                ends = self._change_ends(edge, cur, want, start, length, first)
                 pieces.append(_Piece(f"{edge}_{cur}", start, start))
-                start2 = min(start + shift, length)
+                pieces += [_Piece(f"{edge}_{cur + step * (k + 1)}", e, e) for k, e in enumerate(ends[:-1])]
                 conn = min((c for c in conns if c.from_lane == want),
                            key=lambda c: (abs(c.to_lane - c.from_lane), c.to_lane), default=None)
-                pieces.append(_Piece(f"{edge}_{want}", start2, length, conn))
+                pieces.append(_Piece(f"{edge}_{want}", ends[-1], length, conn))
                 cur = want
             else:
                 conn = min((c for c in conns if c.from_lane == cur),
@@ -198,17 +249,57 @@ class PathDriver(ABC):
             total += length - start
             if conn is None:
                 break
-            for v in conn.via_chain:
-                pieces.append(_Piece(v, 0.0, net.lane_length[v]))
+            for i, v in enumerate(conn.via_chain):
+                pieces.append(_Piece(v, 0.0, net.lane_length[v], enter=conn if i == 0 else None))
                 total += net.lane_length[v]
             edge, cur, start, first = nxt, conn.to_lane, 0.0, False
-        return self._make_path(pieces, w)
+        path = self._make_path(pieces, w)
+        path.hold = hold
+        return path
+
+    def _onward(self, w: World, edge: str, nxt: str) -> tuple[Connection, ...]:
+        """The connections ``edge`` -> ``nxt`` that land on a lane of ``nxt`` with a connection
+        to the edge after it (all of them when none does): the lane is chosen one junction ahead,
+        as a driver does where the next edge is too short to change lanes on."""
+        net = self.net
+        conns = net.connections[(edge, nxt)]
+        nxt2 = self._decided.get(nxt)
+        if nxt2 is None:
+            options = self._options(nxt)
+            nxt2 = self.choose(w, nxt, options, True) if options else None
+        if nxt2 is None or (nxt, nxt2) not in net.connections:
+            return conns
+        good = {c.from_lane for c in net.connections[(nxt, nxt2)]}
+        return tuple(c for c in conns if c.to_lane in good) or conns
+
+    def _change_ends(self, edge: str, cur: int, want: int, start: float, length: float,
+                     first: bool) -> list[float]:
+        """Lane positions (m) where each one-lane step of a change ``cur`` -> ``want`` on ``edge``
+        ends. The first step of a change under way keeps its end (a replan from the lane SUMO
+        reports must not push the goal ahead, or the change never completes)."""
+        n = abs(want - cur)
+        step = float(np.clip((length - start - 5.0) / n, 3.0, LANE_CHANGE_M))
+        nxt_lane = cur + (1 if want > cur else -1)
+        ends: list[float] = []
+        e = start
+        for k in range(n):
+            if k == 0 and first and self._change is not None and self._change[:2] == (edge, nxt_lane) \
+                    and self._change[2] - start > 2.0:
+                e = self._change[2]
+            else:
+                e = min(e + step, length)
+            ends.append(e)
+        if first:
+            self._change = (edge, nxt_lane, ends[0])
+        return ends
 
     def _make_path(self, pieces: list[_Piece], w: World) -> _Path:
         net = self.net
-        pts, speeds, stops = [], [], []
+        pts, speeds, stops, junctions = [], [], [], []
         cum = 0.0
         for p in pieces:
+            if p.enter is not None:
+                junctions.append((cum - p.entered, p.enter))
             seg = net.lane_slice(p.lane, p.a, max(p.a, p.b))
             lim = net.edge_speed.get(_lane_edge(p.lane), 13.89) if not p.lane.startswith(":") else 13.89
             for q in seg:
@@ -224,7 +315,7 @@ class PathDriver(ABC):
         points = np.array(pts) if pts else np.zeros((1, 2))
         c = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))]) if len(points) > 1 \
             else np.zeros(1)
-        return _Path(points, c, np.array(speeds) if speeds else np.zeros(1), stops)
+        return _Path(points, c, np.array(speeds) if speeds else np.zeros(1), stops, junctions=junctions)
 
     def _lane_free(self, w: World, edge: str, lane_index: int, pos: float) -> bool:
         """No vehicle on the target lane near the ego: from 12 m behind to 10 m ahead of its
@@ -242,14 +333,10 @@ class PathDriver(ABC):
 
     # ----------------------------------------------------------------- speed
     def _on_path(self, path: _Path, xy: np.ndarray, half: np.ndarray | float) -> np.ndarray:
-        """Arc position (m) of each object centre on the path, NaN when off the corridor."""
-        if len(xy) == 0 or len(path.points) < 2:
+        """Arc position (m) of each object centre projected on the path, NaN off the corridor."""
+        if len(xy) == 0:
             return np.zeros(0)
-        d = np.hypot(xy[:, None, 0] - path.points[None, :, 0], xy[:, None, 1] - path.points[None, :, 1])
-        k = d.argmin(axis=1)
-        s = path.cum[k]
-        near = d[np.arange(len(xy)), k] < (CORRIDOR + half)
-        return np.where(near, s, np.nan)
+        return project(path.points, path.cum, xy, corridor=CORRIDOR + half)
 
     def _target_speed(self, w: World, path: _Path, t: float) -> float:
         ego = w.ego
@@ -281,38 +368,109 @@ class PathDriver(ABC):
                 stop_s = min(stop_s, float(s.min()) - MIN_GAP)
         # traffic lights, stop signs and yielding at minor links
         for s_line, conn in path.stops:
+            if self._rank(w, conn) == 1:  # a minor link: arrive slowly enough to give way
+                v = min(v, math.sqrt(MINOR_ENTRY_SPEED ** 2 + 2 * COMFORT_DECEL * max(0.0, s_line)))
             key = f"{conn.from_edge}_{conn.from_lane}>{conn.via}"
             if conn.tls:
                 state = w.tl_states.get(conn.tls, "")
                 ch = state[conn.link_index] if 0 <= conn.link_index < len(state) else "G"
                 must_stop = ch in "rRu" or (ch in "yY" and s_line > ego.speed ** 2 / (2 * 6.0))
-                if must_stop or ch == "g" and self._junction_busy(w, conn):
+                if must_stop:
                     stop_s = min(stop_s, s_line - STOP_MARGIN)
                 continue
             if conn.state in ("s", "w") and key not in self._cleared:
                 if s_line - STOP_MARGIN < 3.0 and ego.speed < 0.1:
                     since = self._stopped_at.setdefault(key, t)
-                    if t - since >= STOP_SIGN_WAIT and not self._junction_busy(w, conn):
+                    if t - since >= STOP_SIGN_WAIT and self._junction_stop(w, conn, s_line) == math.inf:
                         self._cleared.add(key)
                         continue
                 stop_s = min(stop_s, s_line - STOP_MARGIN)
-            elif conn.state == "m" and s_line < 20.0 and self._junction_busy(w, conn):
-                stop_s = min(stop_s, s_line - STOP_MARGIN)
+        stop_s = min(stop_s, path.hold, self._yield_stop(w, path))
         if math.isfinite(stop_s):
             v = min(v, math.sqrt(2 * COMFORT_DECEL * max(0.0, stop_s)))
             if stop_s < 0.5:
                 v = 0.0
         return max(0.0, v)
 
-    def _junction_busy(self, w: World, conn: Connection) -> bool:
-        """Another vehicle is inside or within 12 m of the junction's internal lanes."""
-        if len(w.vehicles) == 0 or not conn.via:
-            return False
-        shape = self.net.lane_shape[conn.via]
-        c = shape.mean(axis=0)
-        d = np.hypot(w.vehicles[:, 0] - c[0], w.vehicles[:, 1] - c[1])
-        ego_d = math.hypot(w.ego.x - c[0], w.ego.y - c[1])
-        return bool(np.any((d < 12.0) & (d < ego_d + 6.0)))
+    def _signal(self, w: World, conn: Connection) -> str:
+        """The link's signal now: the light's state character, else its static state
+        (M major, m minor, s stop, w all-way stop)."""
+        if conn.tls:
+            state = w.tl_states.get(conn.tls, "")
+            return state[conn.link_index] if 0 <= conn.link_index < len(state) else "G"
+        return conn.state
+
+    def _rank(self, w: World, conn: Connection) -> int:
+        """Right of way of a link now: 2 major (green ``G``, ``M``, no light ``O``/``o``),
+        1 minor (permissive green ``g``, ``m``), 0 stop (``s``, ``w``, red, yellow)."""
+        return {"G": 2, "M": 2, "O": 2, "o": 2, "g": 1, "m": 1}.get(self._signal(w, conn), 0)
+
+    def _yields_to(self, w: World, conn: Connection, foe: Connection) -> int:
+        """How ``conn`` meets an approaching vehicle on ``foe``: 1 gives way (the foe's link
+        ranks higher, :meth:`_rank`), 0 first come first served (equal rank), -1 goes first."""
+        return int(np.sign(self._rank(w, foe) - self._rank(w, conn)))
+
+    def _yield_stop(self, w: World, path: _Path) -> float:
+        """Arc position (m) before which the ego stops for junction traffic at the junctions
+        within :data:`YIELD_LOOKAHEAD` m (see :meth:`_junction_stop`)."""
+        if len(w.vehicles) == 0:
+            return math.inf
+        return min((self._junction_stop(w, conn, s_entry) for s_entry, conn in path.junctions
+                    if s_entry <= YIELD_LOOKAHEAD), default=math.inf)
+
+    def _junction_stop(self, w: World, conn: Connection, s_entry: float) -> float:
+        """Arc position (m) before which the ego stops for traffic at the junction of ``conn``,
+        whose entry is ``s_entry`` m ahead (negative: the ego is inside).
+
+        Rivals: moving vehicles whose front is inside the junction and that have not passed a
+        conflict point and, where the ego gives way (:meth:`_yields_to`), moving ones
+        approaching it within :data:`YIELD_APPROACH` m or :data:`YIELD_TIME` s (on a link of the
+        same rank: those that get there first). One standing still is no rival: it
+        waits, often for the ego (SUMO's cars see it once it is close), and one standing on the
+        ego's path stops the ego as an obstacle. Before the junction the ego waits at its entry
+        while a rival would reach a conflict point before the ego has passed it; at a merge it
+        follows a rival that is no farther from the merge point than the ego; inside, it stops
+        before the conflict point while it still can."""
+        if len(w.vehicles) == 0:
+            return math.inf
+        xy, yaw, half = w.vehicles[:, :2], w.vehicles[:, 2], 0.5 * w.vehicles[:, 3]
+        v_f = np.where(np.isfinite(self._speeds), self._speeds, UNSEEN_SPEED)
+        moving = v_f > MOVING
+        outside = s_entry > 0.5
+        stop = math.inf
+        for cf in self._conflicts(conn):
+            s_c = s_entry + cf.s_ours
+            if s_c < 0.0:
+                continue  # the conflict point is behind the ego
+            s_v = project(cf.path, cf.cum, xy, yaw)
+            d_f = cf.s_foe - s_v                       # centre's distance to the conflict point
+            near = d_f < np.maximum(YIELD_APPROACH, v_f * YIELD_TIME)
+            ahead_of_entry = s_v + half >= cf.entry    # its front is inside the junction
+            t_ego = (s_c + self.params.length + 2.0) / max(w.ego.speed, 2.0) + YIELD_MARGIN   # s until clear
+            sooner = d_f / np.maximum(v_f, 0.1) < t_ego
+            way = self._yields_to(w, conn, cf.foe)
+            rival = np.isfinite(d_f) & (d_f > -(half + 1.0)) & moving & \
+                (ahead_of_entry | (near & (way > 0)) | (near & sooner & (way == 0)))
+            if not rival.any():
+                continue
+            sooner &= rival
+            if cf.merge:
+                ahead = rival & (d_f < s_c + MERGE_MARGIN)
+                if ahead.any():
+                    stop = min(stop, float((s_c - d_f[ahead] - half[ahead]).min()) - MIN_GAP)
+                sooner &= ~ahead
+            if not sooner.any():
+                continue
+            if outside:
+                stop = min(stop, s_entry - STOP_MARGIN)
+            elif s_c - CONFLICT_CLEAR > 1.0:
+                stop = min(stop, s_c - CONFLICT_CLEAR)
+        return stop
+
+    def _conflicts(self, conn: Connection) -> tuple[Conflict, ...]:
+        if self._conflict_map is None or self._conflict_map.net is not self.net:
+            self._conflict_map = ConflictMap(self.net)
+        return self._conflict_map(conn)
 
     # ----------------------------------------------------------------- output
     def _waypoints(self, w: World, path: _Path) -> np.ndarray:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from ..agents.registry import DEFAULT_AGENT
 from ..errors import InputError
+from ..instructions.baseline_bank import load_baseline_bank
 from ..instructions.families import FAMILIES
 from ..resources import bundled_suites
 
@@ -46,6 +47,9 @@ class EvalOptions:
     #: device of the learned agents that the episode workers run themselves (None: their
     #: default, cpu); with ``batch_inference`` the inference processes use that device instead
     agent_device: str | None = None
+    #: LangAuto's own baseline wording (LMDrive's instruction dictionary, a JSON file) for the
+    #: instruction types it maps; part of the out folder's configuration through its SHA-256
+    baseline_bank: Path | str | None = None
 
     def check(self) -> None:
         """InputErrors for bad values (agent specs are checked when they are resolved)."""
@@ -73,6 +77,8 @@ class EvalOptions:
             if self.inference_processes < 1:
                 raise InputError("--inference-processes", str(self.inference_processes),
                                  "must be at least 1", "give a positive count")
+        if self.baseline_bank is not None:
+            load_baseline_bank(self.baseline_bank)  # an InputError for a bad file, before anything runs
         p = Path(self.suite)
         if self.suite not in bundled_suites() and not p.is_file() and not (p / "index.json").is_file():
             raise InputError("--suite", self.suite, "unknown suite",

@@ -13,6 +13,7 @@ from ..agents.base import Agent
 from ..convert import ConvertOptions, convert_routes, safe_name
 from ..errors import InputError
 from ..fsio import dumps_json, write_atomic
+from ..instructions.baseline_bank import BaselineBank, load_baseline_bank
 from ..instructions.families import FAMILIES
 from ..instructions.generate import GenerateOptions, generate
 from ..resources import bundled_suites, suite_coords
@@ -54,17 +55,25 @@ class PreparedSuite:
     skipped: tuple[str, ...] = ()
 
 
-def check_config(out: Path, opts: EvalOptions) -> dict:
-    """The configuration stored in OUT/config.json; an InputError when OUT holds another one."""
+def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None) -> dict:
+    """The configuration stored in OUT/config.json; an InputError when OUT holds another one.
+    With a ``--baseline-bank`` (``bank``: the file already loaded) the file's SHA-256 is part of
+    it (its name is recorded too, but another path to the same bytes is the same
+    configuration)."""
     config = {"suite": opts.suite, "seed": opts.seed, "k": opts.k, "traffic": opts.traffic}
+    if opts.baseline_bank is not None and bank is None:
+        bank = load_baseline_bank(opts.baseline_bank)
+    compared = {**config, "baseline_bank_sha256": bank.sha256 if bank is not None else None}
     path = out / "config.json"
     if path.is_file():
         old = json.loads(path.read_text(encoding="utf-8"))
-        diff = [k for k in config if old.get(k) != config[k]]
+        diff = [k for k in compared if old.get(k) != compared[k]]
         if diff:
-            shown = ", ".join(f"{k}={old.get(k)!r} (now {config[k]!r})" for k in diff)
+            shown = ", ".join(f"{k}={old.get(k)!r} (now {compared[k]!r})" for k in diff)
             raise InputError(out, "config.json", f"holds results of a different configuration: {shown}",
                              "use another --out folder, or the same options")
+    if bank is not None:
+        config.update(baseline_bank_sha256=bank.sha256, baseline_bank_file=str(bank.path))
     return config
 
 
@@ -86,15 +95,19 @@ def prepare_suite(opts: EvalOptions) -> PreparedSuite:
     folder is used as it is) and generate the instructions of every family into
     OUT/instructions (both reused when present). Skipped routes are named on stderr."""
     out = Path(opts.out)
-    config = check_config(out, opts)
+    bank = load_baseline_bank(opts.baseline_bank) if opts.baseline_bank is not None else None
+    config = check_config(out, opts, bank)
     out.mkdir(parents=True, exist_ok=True)
     write_atomic(out / "config.json", dumps_json(config))
     scenarios, skipped = _resolve_suite(opts, out)
     for line in skipped:
         print(f"icrsumo: skipped: {line}", file=sys.stderr)
     instr_dir = out / "instructions"
+    if bank is not None and bank.set_aside:
+        print(f"icrsumo: note: {bank.path}: {len(bank.set_aside)} phrasing(s) set aside, read as another "
+              f"maneuver (first: {bank.set_aside[0].line()})", file=sys.stderr)
     written, failures = generate(scenarios, instr_dir, GenerateOptions(
-        families=FAMILIES, k=opts.k, seed=opts.seed, workers=1))
+        families=FAMILIES, k=opts.k, seed=opts.seed, workers=1, baseline_bank=bank))
     for line in failures:
         print(f"icrsumo: skipped: {line}", file=sys.stderr)
     return PreparedSuite(scenarios, instr_dir, tuple(written), tuple(skipped) + tuple(failures))

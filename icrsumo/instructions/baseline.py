@@ -15,10 +15,15 @@ Layout along the route (positions in m):
   pedestrians at signalised or stop-controlled junctions with crossings.
 
 Phrasings are drawn from the baseline bank with a Generator seeded by the route seed; distances
-are rounded to 10 m.
+are rounded to 10 m. With a LangAuto-style bank (``--baseline-bank``, :mod:`.baseline_bank`)
+the text of every type it maps is then replaced by one of its phrasings, drawn by a second
+Generator seeded with (route seed, LANGAUTO_STREAM): the sequence's layout (types, triggers,
+distances, notices) and icrsumo's own draws stay exactly those without the bank.
 """
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,12 +31,17 @@ from ..types import Instruction, InstructionSet, Intent, Maneuver, Notice
 from ..vocab import Family
 from .banks import ORDINALS, Banks, fill
 
+if TYPE_CHECKING:
+    from .baseline_bank import BaselineBank
+
 FAR_M, NEAR_M, SINGLE_M = 80.0, 20.0, 50.0
 TWO_STAGE_ROOM_M = 35.0
 FOLLOW_GAP_M = 30.0
 AFTER_M = 10.0
 NOTICE_M = 40.0
 HIGHWAY_EXIT_FAR_M = 150.0
+#: second seed word of the Generator that draws --baseline-bank phrasings ("LANG")
+LANGAUTO_STREAM = 0x4C414E47
 
 _JUNCTION_TYPE = {"traffic_light": "traffic_light", "t_junction": "t_junction",
                   "crossroad": "intersection", "stop_sign": "stop_sign"}
@@ -42,14 +52,24 @@ def _round10(d: float) -> float:
 
 
 class _Builder:
-    def __init__(self, banks: Banks, rng: np.random.Generator) -> None:
-        self.banks, self.rng = banks, rng
+    def __init__(self, banks: Banks, rng: np.random.Generator, user: BaselineBank | None = None,
+                 user_rng: np.random.Generator | None = None) -> None:
+        self.banks, self.rng, self.user, self.user_rng = banks, rng, user, user_rng
         self.items: list[Instruction] = []
+
+    def text(self, itype: str, slots: dict[str, str]) -> str:
+        """icrsumo's phrasing drawn by the route's Generator; replaced by one of the user's
+        LangAuto phrasings (drawn by their own Generator) where the bank maps the type."""
+        phrasings = self.banks.baseline[itype]
+        text = fill(phrasings[int(self.rng.integers(len(phrasings)))], **slots)
+        theirs = self.user.phrasings_for(itype, slots) if self.user is not None else None
+        if theirs and self.user_rng is not None:
+            text = theirs[int(self.user_rng.integers(len(theirs)))]
+        return text
 
     def add(self, itype: str, trigger: float, intent: Intent, m: Maneuver | None = None,
             distance: float | None = None, **slots: str) -> None:
-        phrasings = self.banks.baseline[itype]
-        text = fill(phrasings[int(self.rng.integers(len(phrasings)))], **slots)
+        text = self.text(itype, slots)
         # the first instruction is active from the start; later ones strictly after each other
         trigger = max(trigger, self.items[-1].trigger + 1.0) if self.items else 0.0
         self.items.append(Instruction(
@@ -90,14 +110,17 @@ def build_baseline(
     route_id: str, length: float, maneuvers: list[Maneuver], banks: Banks, seed: int,
     highway_spans: tuple[tuple[float, float], ...] = (),
     crossing_junctions: frozenset[str] = frozenset(),
+    baseline_bank: BaselineBank | None = None,
 ) -> InstructionSet:
     """The baseline sequence of one route (``length`` in m) from its sorted maneuvers.
 
     ``highway_spans``: (start, end) route positions (m) driven on a highway (for the
-    follow_highway types); ``crossing_junctions``: junction ids with pedestrian crossings.
+    follow_highway types); ``crossing_junctions``: junction ids with pedestrian crossings;
+    ``baseline_bank``: LangAuto's phrasings for the types it maps (None: icrsumo's own).
     """
     rng = np.random.default_rng(seed)
-    b = _Builder(banks, rng)
+    user_rng = np.random.default_rng([seed, LANGAUTO_STREAM]) if baseline_bank is not None else None
+    b = _Builder(banks, rng, baseline_bank, user_rng)
     turns = [m for m in maneuvers if not m.kind.startswith("lane_change")]
     cursor = 0.0
     first_announce = min((max(0.0, m.pos - SINGLE_M) for m in maneuvers), default=length)
@@ -148,10 +171,9 @@ def build_baseline(
                           ("notice_pedestrians", m.junction_id in crossing_junctions
                            and m.junction in ("traffic_light", "stop_sign") and rng.random() < 0.5)):
             if ok:
-                phr = banks.baseline[ntype]
                 notices.append(Notice(
                     id=len(notices), trigger=round(max(0.0, m.pos - NOTICE_M), 2),
-                    end=round(m.pos + AFTER_M, 2), text=phr[int(rng.integers(len(phr)))],
+                    end=round(m.pos + AFTER_M, 2), text=b.text(ntype, {}),
                     type=ntype, intent=Intent.STOP,
                 ))
     return InstructionSet(route_id=route_id, family=Family.BASELINE, k=0, seed=seed,

@@ -4,13 +4,17 @@ Randomness: phrasings of the baseline come from a Generator seeded with the rout
 the scenario); every counterfactual draw of a route comes from one Generator seeded with
 ``(--seed, crc32(route id))``. So a route's variants do not depend on which other routes are
 generated with it, nor on the worker count.
+
+``--baseline-bank FILE``: LangAuto's own baseline wording (LMDrive's instruction dictionary) for
+the instruction types it maps (:mod:`.baseline_bank`); validated before any route is touched,
+its SHA-256 recorded in every route file and in ``index.json``.
 """
 
 from __future__ import annotations
 
 import zlib
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 from pathlib import Path
 
@@ -24,6 +28,7 @@ from ..scenario import Scenario, find_scenarios, read_scenario
 from ..types import InstructionSet, Maneuver
 from .banks import Banks, load_banks
 from .baseline import build_baseline
+from .baseline_bank import BaselineBank, load_baseline_bank
 from .families import FAMILIES, make_variants
 from .maneuvers import extract_maneuvers, is_highway
 from .store import FORMAT, route_document
@@ -34,7 +39,9 @@ DEFAULT_K = 8
 
 @dataclass(frozen=True)
 class GenerateOptions:
-    """What to generate. ``llm``: an LLMConfig to use an LLM instead of the template banks."""
+    """What to generate. ``llm``: an LLMConfig to use an LLM instead of the template banks;
+    ``baseline_bank``: a LangAuto-style instruction dictionary (a path, or one already loaded)
+    whose phrasings the baseline uses for the types it maps."""
 
     families: tuple[str, ...] = FAMILIES
     k: int = DEFAULT_K
@@ -42,6 +49,7 @@ class GenerateOptions:
     templates: Path | None = None
     workers: int = 1
     llm: object | None = None
+    baseline_bank: Path | BaselineBank | None = None
 
     def check(self) -> None:
         bad = [f for f in self.families if f not in FAMILIES]
@@ -71,20 +79,28 @@ def _highway_spans(sc: Scenario, net) -> tuple[tuple[float, float], ...]:
                  if i + 1 < len(cuts) and is_highway(net, e))
 
 
-def baseline_set(sc: Scenario, banks: Banks, seed: int) -> tuple[InstructionSet, list[Maneuver]]:
+def baseline_set(sc: Scenario, banks: Banks, seed: int,
+                 baseline_bank: BaselineBank | None = None) -> tuple[InstructionSet, list[Maneuver]]:
     """The baseline sequence of a scenario with phrasings drawn by ``seed`` (the protocol uses
-    the route seed; data collection draws other phrasings), and the route's maneuvers."""
+    the route seed; data collection draws other phrasings), and the route's maneuvers;
+    ``baseline_bank``: LangAuto's phrasings for the types it maps."""
     net = load_net(sc.net)
     maneuvers = extract_maneuvers(sc, net)
     return build_baseline(sc.route_id, sc.length, maneuvers, banks, seed,
-                          _highway_spans(sc, net), net.crossing_nodes), maneuvers
+                          _highway_spans(sc, net), net.crossing_nodes, baseline_bank), maneuvers
+
+
+def _baseline_bank(opts: GenerateOptions) -> BaselineBank | None:
+    bank = opts.baseline_bank
+    return load_baseline_bank(bank) if isinstance(bank, (str, Path)) else bank
 
 
 def generate_route(scenario_dir: Path, opts: GenerateOptions) -> tuple[str, dict]:
     """The instruction document of one converted route."""
     sc = read_scenario(scenario_dir)
     banks = _banks(str(opts.templates) if opts.templates else None)
-    baseline, maneuvers = baseline_set(sc, banks, sc.seed)
+    user = _baseline_bank(opts)
+    baseline, maneuvers = baseline_set(sc, banks, sc.seed, user)
     if opts.llm is None:
         variants = make_variants(baseline, opts.families, opts.k, banks, opts.seed,
                                  route_rng(opts.seed, sc.route_id))
@@ -97,6 +113,7 @@ def generate_route(scenario_dir: Path, opts: GenerateOptions) -> tuple[str, dict
         generator = f"llm:{opts.llm.model}"
     meta = {"seed": opts.seed, "k": opts.k, "families": list(opts.families),
             "generator": generator, "banks_sha256": banks.sha256,
+            **({"baseline_bank_sha256": user.sha256} if user is not None else {}),
             "scenario_hash": sc.manifest.get("source_hash", "")}
     return sc.route_id, route_document(baseline, variants, maneuvers, meta)
 
@@ -131,6 +148,8 @@ def generate(scenarios: Path, out: Path, opts: GenerateOptions) -> tuple[list[st
         raise InputError(scenarios, "", "no converted scenarios found",
                          "run icrsumo convert-routes ROUTES --out DIR first and pass DIR")
     _banks(str(opts.templates) if opts.templates else None)  # validate up front
+    user = _baseline_bank(opts)  # read and validated once, before any route
+    opts = replace(opts, baseline_bank=user)
     jobs = [(str(d), opts) for d in dirs]
     if opts.workers > 1 and len(jobs) > 1:
         with ProcessPoolExecutor(max_workers=min(opts.workers, len(jobs))) as pool:
@@ -149,5 +168,6 @@ def generate(scenarios: Path, out: Path, opts: GenerateOptions) -> tuple[list[st
     write_atomic(Path(out) / "index.json", dumps_json({
         "format": FORMAT.replace("instructions", "instruction-index"), "seed": opts.seed,
         "k": opts.k, "families": list(opts.families), "routes": index, "failures": failures,
+        **({"baseline_bank": user.describe()} if user is not None else {}),
     }))
     return written, failures

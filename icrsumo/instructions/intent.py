@@ -28,11 +28,16 @@ Pipeline
    instead, rather, because, since`` (not ``instead of`` / ``rather than``).
 3. Mentions per clause, each with a level: STRONG (explicit left/right/straight, lane change,
    stop, roundabout exit by ordinal), MEDIUM (implied: a highway exit or off-ramp -> RIGHT;
-   crossing a junction -- "through/across/past/over the intersection", "cross the junction",
-   "go ahead" when the text names a junction -> STRAIGHT) or WEAK (FOLLOW: follow, continue,
-   proceed, keep going, stay on/in, carry on, maintain, merge onto / enter / join / take a
-   road, on-ramps, a motion verb with along/down/onto/forward, a road noun or a compass
-   heading, or a bare imperative "Go." / "Just drive.").
+   crossing a junction -- "through/across/past/over the (coming) intersection", "cross the
+   junction", "go ahead" when the text names a junction, keeping one's course at or through a
+   junction ("maintain your direction at the intersection") -> STRAIGHT) or WEAK (FOLLOW:
+   follow, continue, proceed, keep going, stay on/in, carry on, press on, maintain, merge onto /
+   enter / join / take a road, on-ramps, a motion verb (roll and cruise included) with
+   along/down/onto/forward, a road noun or a compass heading, a bare imperative "Go." / "Just
+   drive.", keeping one's course ("hold your heading", "maintain your current course"),
+   "straight" along a road in a text that names no junction ("continue driving straight on
+   this road"), or starting to drive: start/begin/commence/initiate + driving/the drive/the
+   trip, "set off", "get moving", "pull away").
 
    * left/right is a LANE change when bound to ``lane(s)`` ("left lane", "right-hand lane",
      "lanes to the left", "lane change to the right") or governed by a lane verb ("merge
@@ -44,14 +49,19 @@ Pipeline
      your right"; but "take the second road on the right" and "the exit on the left" are
      maneuvers); in a descriptive copular clause without a driving verb ("the right lane is
      closed", but "the next turn is right" / "the only way is left" count); or when the road
-     itself bends ("follow the road as it curves left").
+     itself bends ("follow the road as it curves left"). Elliptical directions count: a clause
+     that is only "Right (up) ahead", and "then it's a right" (copula + "a" + side).
    * A clause that forbids ("turning right is prohibited", "left turns are not allowed",
      "straight is closed") contributes nothing.
    * Roundabouts (roundabout/rotary/traffic circle anywhere in the text): exit ordinals map
      1st -> RIGHT, 2nd -> STRAIGHT, 3rd and later -> LEFT ("third exit", "3rd exit",
-     "exit 2", "take the first one"); an exit there with no ordinal is UNKNOWN.
+     "exit 2", "take the first one", "exit at the second opportunity", "leave the roundabout
+     by the third"); an exit there with no ordinal is UNKNOWN. An exit counted by an ordinal
+     word from "second" on in a text that names neither a roundabout nor a highway ("Second
+     exit.", "Roll out on the third exit") is read the same way: highway exits go by number
+     or by "next".
    * Elsewhere an exit without a stated side ("Take exit 23B", "Take the exit", "Exit the
-     highway", "Leave the motorway", "off-ramp") is RIGHT: the bundled towns drive on the right
+     highway", "Leave / quit the motorway", "off-ramp") is RIGHT: the bundled towns drive on the right
      and highway exits leave to the right. A stated side wins ("take the exit on the left").
    * Vague destination talk is UNKNOWN ("Head to the destination", "Go that way"): a motion
      verb needs a road, a heading or along/down/onto to be FOLLOW, while continue / follow /
@@ -62,12 +72,15 @@ Pipeline
    * A clause with no mention that is a caution notice ("Stop sign ahead", "Watch out for
      pedestrians", "Yield to cyclists", "Give way", "Slow down", "Traffic light ahead") is a
      NOTICE-level STOP: the weakest mention of all (the baseline bank labels notices "stop").
+     So are being aware / mindful / alert of something, "heads up", and slowing down
+     ("decelerate", "reduce your speed", "easy on the gas").
 4. Negation: ``not, no, never, avoid, skip, ignore, forget, cancel, without, disregard, nor,
    instead of, rather than, stop + -ing`` negate the mentions after them in their clause up to
    the end of the first verb phrase (a new driving verb after a negated mention ends the scope:
    "do not turn left turn right"). "Don't forget / miss / fail to ..." stays positive. Some
    negations mean something themselves: "don't move / go no further / do not proceed until"
-   -> STOP; "don't change lanes", "skip this exit", "don't turn here" -> FOLLOW. Two different
+   -> STOP; "don't change lanes", "skip this exit", "don't turn here / off", "do not deviate
+   (stray, swerve, depart) from this route", "don't leave the highway" -> FOLLOW. Two different
    directions joined by "or" ("turn left or right") cancel each other.
 5. Subordination: mentions after ``before, after, once, when, whenever, until, till, while, as,
    if, unless`` in their clause, and clauses introduced by ``otherwise``, are subordinate.
@@ -131,7 +144,7 @@ _COMPASS = _words(
 _FOLLOW_CONTEXT = _ROAD | _COMPASS | _words("along down up onto on forward forwards")
 _MOTION = _words(
     "go goes going drive drives driving head heads heading travel traveling travelling move moving "
-    "cruise ride"
+    "cruise cruising ride roll rolls rolling"
 )
 _BARE_MOTION_PREV = _words("just please now simply then and so keep")
 _ROAD_VERBS = _words("enter entering join joining take cross crosses")
@@ -188,9 +201,12 @@ _AHEAD_VERBS = _MOTION | _words("continue proceed carry keep")
 _STOP_HEADS = _words(
     "stop stops stopping halt standstill brake brakes braking wait waiting park pull stand stay hold"
 )
-_EXIT_HEADS = _words("exit exits ramp leave leaving off")
+_EXIT_HEADS = _words("exit exits ramp leave leaving off quit quits quitting")
 _EXIT_CONTEXT = _HIGHWAY | _words("exit exits ramp")
-_TRAVERSE_SKIP = _DETS | _words("next upcoming first second 4 four way traffic stop big main t")
+_TRAVERSE_SKIP = _DETS | _words(
+    "next upcoming first second 4 four way traffic stop big main t coming approaching following "
+    "forthcoming ensuing subsequent imminent nearest"
+)
 _CROSS_SKIP = _TRAVERSE_SKIP | _words("over at")
 _STOP_NOUN_NEXT = _words("sign signs line lines light lights bar signal signals marker street")
 _STOP_NOUN_PREV = _words("bus truck rest pit tram taxi next last first non one")
@@ -204,6 +220,8 @@ _NEGATORS = _words(
     "not no never avoid avoiding skip skipping ignore ignoring forget cancel without disregard nor"
 )
 _NEG_FILLER = _words("to do be you of than")
+# "no" that negates nothing: "no sweat, ...", "no problem", "no big deal", "no worries"
+_NO_IDIOM = _words("sweat problem problems worries worry biggie big doubt rush hurry pressure stress fuss")
 _NEG_CANCEL = _words("forget miss fail neglect hesitate ignore skip")
 _NEG_MOTION = _words("move go proceed continue drive moving going driving")
 _NEG_MOTION_NEXT = _words("yet further forward anymore any until now here beyond") | {""}
@@ -215,7 +233,14 @@ _ING_NOUNS = _words(
     "parking building buildings crossing crossings morning evening nothing something anything "
     "everything turning ceiling during string spring sibling"
 )
-_CAUTION = _words("watch caution careful carefully beware alert attention mind yield yielding obey cautious")
+_CAUTION = _words(
+    "watch caution careful carefully beware alert attention mind yield yielding obey cautious aware mindful "
+    "wary vigilant attentive"
+)
+# slowing down is a caution notice too ("decelerate", "reduce your speed", "ease off the gas")
+_DECELERATE = _words("decelerate decelerates decelerating deceleration")
+_SPEED = _words("speed speeds velocity pace gas throttle accelerator")
+_LESS = _words("reduce reduces reducing reduction lower lowering decrease decreasing cut drop ease easy")
 _HAZARD = _words(
     "pedestrian pedestrians people cyclist cyclists bike bikes bicycle children kids animal animals deer "
     "crosswalk crossing obstacle obstacles hazard roadworks signal signals"
@@ -223,6 +248,24 @@ _HAZARD = _words(
 _LIGHTS = _words("light lights")
 _APPROACH = _words("ahead approaching coming upcoming red near")
 _SUBORDINATE = _words("before after once when whenever until till while as if unless")
+# starting to drive ("commence driving", "begin the trip", "set off", "get moving", "pull away")
+_START_VERBS = _words("start starts begin begins commence commences commencing initiate initiates")
+_START_OBJECTS = _words("driving drive moving going journey trip route rolling motion ride")
+_SET_OFF = {"set": _words("off out forth"), "get": _words("moving going rolling started"),
+            "pull": _words("away"), "press": _words("on ahead forward onward onwards"),
+            "push": _words("on ahead forward onward onwards")}
+# keeping one's course ("maintain your course", "hold your heading"): FOLLOW, or STRAIGHT when it
+# is kept at / through a junction ("maintain your direction at the intersection")
+_COURSE_KEEP = _words(
+    "keep keeps keeping maintain maintains maintaining preserve preserves preserving hold holds holding "
+    "stay stays staying remain remains remaining continue continues continuing follow follows"
+)
+_COURSE = _words("course heading direction trajectory bearing line")
+_COURSE_SKIP = _DETS | _words("present existing original")
+_AT_JUNCTION = _words("at through across past over")
+_EXIT_BY = _words("at by on via using")
+# what "don't ..." asks for when it keeps the current road ("do not deviate from this route")
+_DEVIATE = _words("deviate deviating stray straying swerve diverge diverging depart departing")
 _OR_GAP = _words("or either to the go turn")
 _BOUNDARY = frozenset({",", "."})
 _HEADS = _LEFT_RIGHT | _LANE | _words("straight stop halt exit ramp follow continue proceed brake wait park")
@@ -235,6 +278,7 @@ _FUZZY_TARGETS: tuple[str, ...] = (
     "proceed", "ahead", "road", "street", "highway", "freeway", "motorway", "through", "across", "cross",
     "halt", "brake", "wait", "pull", "keep", "stay", "going", "driving", "instead", "ignore", "never",
     "first", "second", "third", "fourth", "traffic", "carry", "ramp", "drive", "following",
+    "start", "stick", "maintain", "maintaining", "course", "direction", "deviate", "commence",
 )
 
 _ALIASES: dict[str, tuple[str, ...]] = {
@@ -366,6 +410,9 @@ _RULE_WORDS = (
     | _PULL_STOP | _NOT_ROAD_EXIT | _NEGATORS | _NEG_CANCEL | _NEG_MOTION | _NEG_MOTION_NEXT
     | _SPLIT | _SUBORDINATE | _HEADS | frozenset(_ORDINALS) | frozenset(_NUMBER_WORDS)
     | _words("instead rather of than standstill still put hold position u around back stand sure")
+    | _CAUTION | _DECELERATE | _SPEED | _LESS | _START_VERBS | _START_OBJECTS | frozenset(_SET_OFF)
+    | frozenset().union(*_SET_OFF.values()) | _COURSE_KEEP | _COURSE | _COURSE_SKIP | _DEVIATE
+    | _words("heads quit quits quitting leave leaves") | _NO_IDIOM
 )
 _KNOWN = _STOP_LIST | _RULE_WORDS | frozenset(_FUZZY_TARGETS)
 _NO_SLOT_FIX = _KNOWN - frozenset(_SLOT_HOMOPHONES)
@@ -376,8 +423,9 @@ _TRIGGERS = (
     | _words(
         "straight stop stops stopping halt standstill brake brakes braking wait waiting park pull stand "
         "stay stays hold exit exits ramp leave leaving off ahead cross crosses merge merging resume carry "
-        "keep keeps remain remains maintain stick start begin get"
+        "keep keeps remain remains maintain stick start begin get quit quits quitting"
     )
+    | _START_VERBS | frozenset(_SET_OFF) | _COURSE_KEEP
 )
 _TRIGGERS_OR_NEG = _TRIGGERS | _NEGATOR_HEADS
 
@@ -608,7 +656,7 @@ def _is_negator(c: tuple[str, ...], i: int) -> bool:
     tok = c[i]
     nxt = c[i + 1] if i + 1 < len(c) else ""
     return (
-        tok in _NEGATORS
+        (tok in _NEGATORS and not (tok == "no" and nxt in _NO_IDIOM))
         or (tok in ("instead", "rather") and nxt in ("of", "than"))
         or (tok == "stop" and nxt.endswith("ing") and nxt != "stopping")
     )
@@ -622,7 +670,9 @@ def _negated_meaning(c: tuple[str, ...], j: int) -> Intent | None:
     if target in ("further", "farther") or (target in _NEG_MOTION and after in _NEG_MOTION_NEXT):
         return Intent.STOP
     lane_keep = target in ("change", "switch") and after in _LANE and not (_LEFT_RIGHT & set(c[j:]))
-    bare_turn = target == "turn" and after in ("", "here", "yet", "now", "anywhere", "at")
+    bare_turn = target == "turn" and after in ("", "here", "yet", "now", "anywhere", "at", "off")
+    if target in _DEVIATE or (target in ("leave", "quit") and _followed_by(c, j, _ROAD, 3)):
+        return Intent.FOLLOW  # "do not deviate from this route", "don't leave the highway"
     if lane_keep or bare_turn or "exit" in c[j : j + 4] or "exits" in c[j : j + 4]:
         return Intent.FOLLOW
     return None
@@ -671,6 +721,8 @@ def _is_direction(c: tuple[str, ...], i: int) -> bool:
         return not (prev in _DIR_PREV_MOTION and nxt in _RIGHT_ADVERB_NEXT)  # "drive right through it"
     if prev == "all" or (prev in ("is", "are") and i >= 2 and c[i - 2] in ("that", "you", "thats")):
         return False
+    if i == 0 and "ahead" in c[1:] and set(c[1:]) <= {"up", "ahead", "just"}:
+        return True  # the whole clause is "Right (up) ahead."
     if nxt in _RIGHT_PLACE_NEXT:
         return prev not in _STATIC_PREV  # "stop right at the line" vs "hda right at the junction"
     return nxt not in _RIGHT_INTENSIFIED
@@ -728,8 +780,9 @@ def _left_right(c: tuple[str, ...], i: int, copula: bool, bend: bool) -> Intent 
     nxt = c[i + 1] if i + 1 < len(c) else ""
     if nxt in _TURN_NOUN_NEXT or (nxt == "hand" and i + 2 < len(c) and c[i + 2] in _TURN_NOUN_NEXT):
         return turn
-    if copula and not bend and i and c[i - 1] in _COPULA:
-        return turn  # "the only open way is left"
+    if copula and not bend and i and (c[i - 1] in _COPULA or (
+            nxt == "" and i >= 2 and c[i - 1] == "a" and c[i - 2] in _COPULA)):
+        return turn  # "the only open way is left", "then it's a right"
     if copula or bend:
         return None
     if _lane_verb(c, i):
@@ -750,6 +803,10 @@ def _exit_ordinal(c: tuple[str, ...], i: int) -> int | None:
             return _NUMBER_WORDS[c[j]]
         if c[j].isdigit() and 0 < int(c[j]) < 10:
             return int(c[j])
+    # "exit at the second (one / opportunity)", "exit the roundabout by the third"
+    for j in range(i + 2, min(i + 7, len(c))):
+        if c[j] in _ORDINALS and c[j - 1] == "the" and (j == i + 2 or c[j - 2] in _EXIT_BY):
+            return _ORDINALS[c[j]]
     return None
 
 
@@ -773,10 +830,11 @@ def _followed_by(c: tuple[str, ...], i: int, words: frozenset[str], span: int = 
 
 
 def _mention(
-    c: tuple[str, ...], i: int, ctx: tuple[bool, bool], copula: bool, bend: bool
+    c: tuple[str, ...], i: int, ctx: tuple[bool, bool, bool], copula: bool, bend: bool
 ) -> tuple[Intent, int] | None:
-    """The mention headed by token ``i`` of clause ``c`` as (intent, level), or None."""
-    roundabout, junction = ctx
+    """The mention headed by token ``i`` of clause ``c`` as (intent, level), or None.
+    ``ctx``: whether the text names a roundabout, a junction, a highway."""
+    roundabout, junction, highway = ctx
     tok = c[i]
     prev = c[i - 1] if i else ""
     nxt = c[i + 1] if i + 1 < len(c) else ""
@@ -786,11 +844,13 @@ def _mention(
     if tok == "straight":
         if (nxt == "away" and prev not in _MOTION) or bend or copula:
             return None
+        if not junction and _along_road(c, i):  # "drive straight on this road": no junction to cross
+            return Intent.FOLLOW, _WEAK
         return Intent.STRAIGHT, _STRONG
     if tok in _STOP_HEADS and _stop_mention(c, i, tok, prev, nxt):
         return Intent.STOP, _STRONG
     if tok in _EXIT_HEADS or tok in _ORDINALS:
-        return _exit_mention(c, i, tok, prev, nxt, roundabout)
+        return _exit_mention(c, i, tok, prev, nxt, roundabout, highway)
     if tok in _TRAVERSE or tok in ("cross", "crosses"):
         if _crosses_junction(c, i, junction):
             return Intent.STRAIGHT, _MEDIUM
@@ -798,7 +858,33 @@ def _mention(
         if not any(t in _AHEAD_VERBS for t in c[max(0, i - 2) : i]):
             return None
         return (Intent.STRAIGHT, _MEDIUM) if junction else (Intent.FOLLOW, _WEAK)
+    if tok in _COURSE_KEEP:
+        kept = _course(c, i, junction)
+        if kept is not None:
+            return kept
     return _follow(c, i, tok, nxt)
+
+
+def _along_road(c: tuple[str, ...], i: int) -> bool:
+    """Whether "straight" at ``i`` runs along a road ("straight on this road", "straight down
+    the highway") rather than across a junction."""
+    return i + 1 < len(c) and c[i + 1] in ("on", "along", "down", "up") and any(
+        t in _ROAD for t in c[i + 2 : i + 5])
+
+
+def _course(c: tuple[str, ...], i: int, junction: bool) -> tuple[Intent, int] | None:
+    """Keeping one's course at ``i`` ("maintain your course", "hold your current heading"):
+    STRAIGHT when it is kept at / through a junction, else FOLLOW; None when no course noun
+    follows."""
+    j = i + 1
+    while j < len(c) and j <= i + 3 and c[j] in _COURSE_SKIP:
+        j += 1
+    if j >= len(c) or c[j] not in _COURSE:
+        return None
+    k = j + 2 if j + 1 < len(c) and c[j + 1] == "straight" else j + 1
+    if k < len(c) and c[k] in _AT_JUNCTION and _crosses_junction(c, k, junction):
+        return Intent.STRAIGHT, _MEDIUM
+    return Intent.FOLLOW, _WEAK
 
 
 def _stop_mention(c: tuple[str, ...], i: int, tok: str, prev: str, nxt: str) -> bool:
@@ -817,9 +903,11 @@ def _stop_mention(c: tuple[str, ...], i: int, tok: str, prev: str, nxt: str) -> 
 
 
 def _exit_mention(
-    c: tuple[str, ...], i: int, tok: str, prev: str, nxt: str, roundabout: bool
+    c: tuple[str, ...], i: int, tok: str, prev: str, nxt: str, roundabout: bool, highway: bool
 ) -> tuple[Intent, int] | None:
-    """Exits, ramps and leaving a highway: roundabout ordinals, else an implied RIGHT."""
+    """Exits, ramps and leaving a highway: roundabout ordinals, else an implied RIGHT. An exit
+    counted by an ordinal word in a text that names no highway ("Second exit.") is read as a
+    roundabout exit; highway exits go by number ("exit 23B") or by "next"."""
     if tok in ("exit", "exits"):
         j = i + 1
         while j < len(c) and c[j] in _DETS:
@@ -829,6 +917,9 @@ def _exit_mention(
         if roundabout:
             k = _exit_ordinal(c, i)
             return (_ordinal_intent(k), _STRONG) if k else None
+        k = _ORDINALS.get(prev, 0)
+        if k >= 2 and not highway:
+            return _ordinal_intent(k), _STRONG
         return Intent.RIGHT, _MEDIUM
     if tok in _ORDINALS:  # "take the first (one)" at a roundabout
         if roundabout and prev == "the" and nxt in ("", "one"):
@@ -851,7 +942,10 @@ def _crosses_junction(c: tuple[str, ...], i: int, junction: bool) -> bool:
 
 
 def _follow(c: tuple[str, ...], i: int, tok: str, nxt: str) -> tuple[Intent, int] | None:
-    """FOLLOW mentions: follow/continue/keep going/stay on/merge onto/motion along a road."""
+    """FOLLOW mentions: follow/continue/keep going/stay on/merge onto/motion along a road, and
+    starting to drive (start/begin/commence driving, set off, get moving, pull away, press on)."""
+    if tok == "heads" and nxt == "up":  # "heads up": a warning, not a motion
+        return None
     follow = (
         tok in _FOLLOW_VERBS
         or tok in ("merge", "merging", "resume")
@@ -860,6 +954,8 @@ def _follow(c: tuple[str, ...], i: int, tok: str, nxt: str) -> tuple[Intent, int
         or (tok in ("stay", "stays", "remain", "remains", "maintain") and nxt in _STAY_NEXT)
         or (tok == "stick" and nxt in ("to", "with"))
         or (tok in ("start", "begin") and nxt in ("driving", "moving", "going"))
+        or (tok in _START_VERBS and _followed_by(c, i, _START_OBJECTS, 3))
+        or (tok in _SET_OFF and nxt in _SET_OFF[tok])
         or (tok in _MOTION and _followed_by(c, i, _FOLLOW_CONTEXT, 8))
         or (tok in _MOTION and i == len(c) - 1 and (i == 0 or c[i - 1] in _BARE_MOTION_PREV))
         or (tok in _ROAD_VERBS and _followed_by(c, i, _ROAD, 3))
@@ -880,7 +976,7 @@ def _bends(c: tuple[str, ...]) -> bool:
     return any(t in _BEND and any(s in _BEND_SUBJECT for s in c[:k]) for k, t in enumerate(c))
 
 
-def _clause_mentions(c: tuple[str, ...], alt: bool, ctx: tuple[bool, bool]) -> list[_Mention]:
+def _clause_mentions(c: tuple[str, ...], alt: bool, ctx: tuple[bool, bool, bool]) -> list[_Mention]:
     """Surviving (non-negated, highest-level) mentions of one clause."""
     words = set(c)
     if not words & _TRIGGERS_OR_NEG:
@@ -913,6 +1009,8 @@ def _is_notice(c: tuple[str, ...], words: set[str]) -> bool:
         return True
     if "slow" in words and ("down" in words or c[0] == "slow"):
         return True
+    if words & _DECELERATE or (words & _SPEED and words & _LESS) or {"heads", "up"} <= words:
+        return True  # "decelerate", "reduce your speed", "easy on the gas", "heads up"
     hazard = words & _HAZARD or words & _LIGHTS or ("stop" in words and "sign" in words)
     return bool(hazard and words & _APPROACH)
 
@@ -945,7 +1043,7 @@ def _choose(mentions: list[_Mention]) -> Intent:
 
 def _classify(tokens: tuple[str, ...]) -> Intent:
     words = set(tokens)
-    ctx = (bool(words & _ROUNDABOUT), bool(words & _JUNCTION))
+    ctx = (bool(words & _ROUNDABOUT), bool(words & _JUNCTION), bool(words & _HIGHWAY))
     mentions: list[_Mention] = []
     for clause, alt in _clauses(tokens):
         mentions.extend(_clause_mentions(clause, alt, ctx))

@@ -1,4 +1,5 @@
-"""``icrsumo collect``: expert driving data for the learned agents, from the ``train`` split only.
+"""``icrsumo collect``: expert driving data for the learned agents, from training routes only
+(the ``train`` split on icrsumo's towns, ``carla-train`` on CARLA's; never an evaluation suite).
 
 The expert is the route-oracle (it knows the route). On every agent step (10 Hz) it plans from
 the current state; its plan, resampled at :data:`icrsumo.learn.labels.ARC_M`, and its target
@@ -44,15 +45,21 @@ from ..errors import InputError
 from ..fsio import dumps_json, write_atomic
 from ..instructions.banks import load_banks
 from ..instructions.generate import baseline_set
-from ..resources import bundled_suites
+from ..resources import bundled_suites, suite_coords
 from ..scenario import find_scenarios, read_scenario
 from ..types import Instruction
+from ..vocab import Termination
 from .augment import instruction_slots
 from .labels import StopClock, resample_path
 
 COLLECT_FORMAT = "icrsumo-collect/1"
-#: bundled splits that hold evaluation routes: never collected from
-EVAL_SPLITS = ("tiny", "short", "long")
+#: bundled suites that hold evaluation routes (icrsumo's splits, LangAuto's tracks): never
+#: collected from, by name or by their file's path
+EVAL_SPLITS = ("tiny", "short", "long", "langauto-tiny", "langauto-short", "langauto-long")
+#: terminations after which the frames of the final standstill longer than STUCK_AFTER_S (s)
+#: are dropped
+STUCK = (Termination.AGENT_BLOCKED, Termination.ROUTE_TIMEOUT)
+STUCK_AFTER_S = 20.0
 #: chance per agent step (10 Hz) that a perturbation starts on a perturbed pass
 P_START = 0.04
 
@@ -74,15 +81,25 @@ class CollectOptions:
     driver: str = ""
 
     def check(self) -> None:
-        if self.suite in EVAL_SPLITS:
+        if self.suite in EVAL_SPLITS or _is_eval_file(self.suite):
             raise InputError("--suite", self.suite, "is an evaluation split",
-                             "collect from the train split (the default) or your own routes")
+                             "collect from the train split (the default), carla-train (CARLA's "
+                             "towns) or your own routes")
         if not 1 <= self.passes <= 32:
             raise InputError("--passes", "", f"{self.passes} out of range", "use 1 to 32")
         if not 1 <= self.every <= 50:
             raise InputError("--every", "", f"{self.every} out of range", "use 1 to 50")
         if self.workers < 1:
             raise InputError("--workers", "", "must be at least 1", "give a positive count")
+
+
+def _is_eval_file(suite: str) -> bool:
+    """Whether ``suite`` is the path of a bundled evaluation suite's route file."""
+    p = Path(suite)
+    if not p.is_file():
+        return False
+    suites = bundled_suites()
+    return any(p.resolve() == suites[s].resolve() for s in EVAL_SPLITS if s in suites)
 
 
 class Collector(RouteOracle):
@@ -184,6 +201,12 @@ def collect_episode(scenario_dir: str, pass_k: int, opts: CollectOptions) -> tup
     agent = Collector(rng, perturb=pass_k > 0 and driver is None, every=opts.every, driver=driver)
     log = run_episode(sc, iset, agent)
     r = agent.rows
+    if log.termination in STUCK:
+        # the expert got stuck: its final standstill is no demonstration
+        keep = len(r["speed"])
+        while keep and r["stopped_for"][keep - 1] >= STUCK_AFTER_S:
+            keep -= 1
+        r = {k: v[:keep] for k, v in r.items()}
     arrays = {
         "bev": np.stack(r["bev"]).astype(np.uint8),
         "speed": np.asarray(r["speed"], dtype=np.float32),
@@ -217,9 +240,10 @@ def _scenarios(opts: CollectOptions, out: Path) -> Path:
     routes = bundled_suites().get(opts.suite, p)
     if not Path(routes).is_file():
         raise InputError(opts.suite, "", "no such route file or bundled split",
-                         "use train (the default) or a route XML file")
-    report = convert_routes(routes, out / "scenarios", ConvertOptions(traffic=opts.traffic,
-                                                                     workers=opts.workers))
+                         "use train (the default), carla-train or a route XML file")
+    coords = suite_coords(opts.suite) or "sumo"  # a bundled suite knows its frame (carla-train: carla)
+    report = convert_routes(routes, out / "scenarios", ConvertOptions(
+        coords=coords, traffic=opts.traffic, workers=opts.workers))
     for line in report.failures:
         print(f"icrsumo: skipped: {line}", file=sys.stderr)
     return out / "scenarios"

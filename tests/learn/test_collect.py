@@ -1,4 +1,5 @@
-"""Collection drives real SUMO with the route-oracle expert (on one tiny-suite route here)."""
+"""Collection drives real SUMO with the route-oracle expert (on one tiny-suite route here); the
+tests that do use the ``converted`` fixture, which marks them ``sumo`` (conftest)."""
 
 import io
 import json
@@ -8,9 +9,8 @@ import pytest
 
 from icrsumo.errors import InputError
 from icrsumo.learn.collect import CollectOptions, collect, collect_episode
+from icrsumo.resources import bundled_suites, suite_coords
 from icrsumo.scenario import find_scenarios
-
-pytestmark = pytest.mark.sumo
 
 
 @pytest.fixture(scope="module")
@@ -58,10 +58,21 @@ def test_collect_resumes_and_refuses_other_config(converted, tmp_path):
                 quiet=True)
 
 
-def test_evaluation_splits_are_refused(tmp_path):
-    for split in ("tiny", "short", "long"):
+@pytest.mark.parametrize("split", ["tiny", "short", "long", "langauto-tiny", "langauto-short",
+                                   "langauto-long"])
+def test_evaluation_suites_are_refused(tmp_path, split):
+    """icrsumo's evaluation splits and LangAuto's tracks, by name or by their file's path (no SUMO:
+    refused before anything is converted)."""
+    for suite in (split, str(bundled_suites()[split])):
         with pytest.raises(InputError, match="evaluation split"):
-            collect(CollectOptions(suite=split), tmp_path)
+            collect(CollectOptions(suite=suite), tmp_path)
+    assert not any(tmp_path.iterdir())
+
+
+def test_training_suites_are_accepted():
+    for suite in ("train", "carla-train"):
+        CollectOptions(suite=suite).check()
+    assert suite_coords("carla-train") == "carla"  # converted in CARLA's frame by collect
 
 
 def test_dagger_pass_lets_a_learned_agent_drive(one_route):

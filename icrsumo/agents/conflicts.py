@@ -1,0 +1,136 @@
+"""Where a connection's path through a junction meets the paths of other connections, from the
+network's geometry alone (used by the privileged agents to yield).
+
+SUMO's background vehicles do not yield to the ego: it is moved with ``moveToXY``, so it never
+announces its approach to a junction link, and a car on a minor link drives as if the ego were
+not coming. The privileged agents therefore look for junction foes themselves: every
+connection of the same junction from another incoming edge whose internal lanes cross its own
+(centre lines within :data:`CONFLICT_M`), or that ends on the same lane (a merge).
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass
+
+import numpy as np
+from shapely.geometry import LineString
+from shapely.ops import nearest_points
+
+from ..networks import Connection, RoadNet
+
+#: m between two internal lanes' centre lines below which they conflict (two car widths)
+CONFLICT_M = 2.0
+#: m of a foe's incoming lane, before the junction, over which its vehicles are watched
+APPROACH_M = 70.0
+
+
+@dataclass(frozen=True)
+class Conflict:
+    """One foe connection of ``conn``: the point where their paths meet, at ``s_ours`` m along
+    ``conn``'s internal lanes and ``s_foe`` m along ``path`` ((N, 2) m: the last
+    :data:`APPROACH_M` of the foe's incoming lane, then its internal lanes; ``cum`` (N,) m its
+    arc length, ``entry`` m where the junction begins on it). ``merge``: both end on one lane."""
+
+    foe: Connection
+    merge: bool
+    s_ours: float
+    s_foe: float
+    path: np.ndarray
+    cum: np.ndarray
+    entry: float
+
+
+def junction_of(lane: str) -> str:
+    """The junction id of an internal lane ``:J_link_index``."""
+    return lane[1:].rsplit("_", 2)[0]
+
+
+def _chain(net: RoadNet, conn: Connection) -> np.ndarray:
+    parts = [net.lane_shape[v] for v in conn.via_chain]
+    return np.concatenate(parts) if parts else np.zeros((0, 2))
+
+
+def _arc(points: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+
+
+class ConflictMap:
+    """The conflicts of every connection of one network, computed on first use."""
+
+    def __init__(self, net: RoadNet) -> None:
+        self.net = net
+        self._by_junction: dict[str, list[Connection]] | None = None
+        self._cache: dict[tuple[str, str, int], tuple[Conflict, ...]] = {}
+
+    def _junctions(self) -> dict[str, list[Connection]]:
+        if self._by_junction is None:
+            index: dict[str, list[Connection]] = defaultdict(list)
+            for conns in self.net.connections.values():
+                for c in conns:
+                    if c.via:
+                        index[junction_of(c.via)].append(c)
+            self._by_junction = dict(index)
+        return self._by_junction
+
+    def __call__(self, conn: Connection) -> tuple[Conflict, ...]:
+        key = (conn.via, conn.to_edge, conn.to_lane)
+        if key not in self._cache:
+            self._cache[key] = self._compute(conn)
+        return self._cache[key]
+
+    def _compute(self, conn: Connection) -> tuple[Conflict, ...]:
+        net = self.net
+        ours = _chain(net, conn)
+        if not conn.via or len(ours) < 2:
+            return ()
+        line = LineString(ours)
+        found = []
+        for foe in self._junctions().get(junction_of(conn.via), ()):
+            if foe.from_edge == conn.from_edge:
+                continue
+            theirs = _chain(net, foe)
+            if len(theirs) < 2:
+                continue
+            foe_line = LineString(theirs)
+            merge = (foe.to_edge, foe.to_lane) == (conn.to_edge, conn.to_lane)
+            if merge:
+                s_ours, s_foe_via = line.length, foe_line.length
+            elif line.distance(foe_line) < CONFLICT_M:
+                p_ours, p_foe = nearest_points(line, foe_line)
+                s_ours, s_foe_via = line.project(p_ours), foe_line.project(p_foe)
+            else:
+                continue
+            lane = f"{foe.from_edge}_{foe.from_lane}"
+            length = net.lane_length[lane]
+            tail = net.lane_slice(lane, max(0.0, length - APPROACH_M), length)
+            path = np.concatenate([tail, theirs])
+            keep = np.concatenate([[True], np.hypot(*np.diff(path, axis=0).T) > 1e-3])
+            path = path[keep]
+            entry = float(_arc(tail)[-1]) if len(tail) > 1 else 0.0
+            found.append(Conflict(foe=foe, merge=merge, s_ours=float(s_ours), s_foe=entry + float(s_foe_via),
+                                  path=path, cum=_arc(path), entry=entry))
+        return tuple(found)
+
+
+def project(points: np.ndarray, cum: np.ndarray, xy: np.ndarray, yaw: np.ndarray | None = None,
+            corridor: float | np.ndarray = 1.5) -> np.ndarray:
+    """Arc position (m) along the polyline ``points`` ((S+1, 2) m, arc length ``cum``) of each
+    point of ``xy`` ((N, 2) m) projected on its nearest segment; NaN where it lies farther than
+    ``corridor`` m from the line or, given ``yaw`` ((N,) rad), heads more than 60 degrees off
+    the segment's direction."""
+    if len(xy) == 0 or len(points) < 2:
+        return np.full(len(xy), np.nan)
+    a, ab = points[:-1], np.diff(points, axis=0)
+    seg = np.maximum((ab ** 2).sum(axis=1), 1e-9)
+    rel = xy[:, None, :] - a[None, :, :]
+    u = np.clip((rel * ab[None]).sum(axis=2) / seg[None], 0.0, 1.0)
+    d = np.hypot(rel[..., 0] - u * ab[None, :, 0], rel[..., 1] - u * ab[None, :, 1])
+    k = d.argmin(axis=1)
+    rows = np.arange(len(xy))
+    s = cum[k] + u[rows, k] * np.sqrt(seg[k])
+    near = d[rows, k] < corridor
+    if yaw is not None:
+        heading = np.arctan2(ab[k, 1], ab[k, 0])
+        near &= np.abs((yaw - heading + np.pi) % (2 * np.pi) - np.pi) < np.pi / 3
+    return np.where(near, s, np.nan)
