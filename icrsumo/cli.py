@@ -59,7 +59,8 @@ def _cmd_generate(args: argparse.Namespace) -> int:
         from .instructions.baseline_bank import load_baseline_bank
 
         bank = load_baseline_bank(args.baseline_bank)
-        _note_set_aside(bank)
+        if bank.note():
+            print(bank.note(), file=sys.stderr)
     opts = GenerateOptions(families=families, k=args.k, seed=args.seed, templates=args.templates,
                            workers=args.workers, llm=llm, baseline_bank=bank)
     t0 = time.perf_counter()
@@ -69,14 +70,6 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     for line in failures:
         print(line, file=sys.stderr)
     return 2 if failures else 0
-
-
-def _note_set_aside(bank) -> None:
-    """One stderr line when phrasings of a --baseline-bank file are not used."""
-    if bank.set_aside:
-        n = len(bank.set_aside)
-        print(f"icrsumo: note: {bank.path}: {n} phrasing{'s' if n > 1 else ''} set aside, read as another "
-              f"maneuver (first: {bank.set_aside[0].line()})", file=sys.stderr)
 
 
 def _cmd_run_episode(args: argparse.Namespace) -> int:

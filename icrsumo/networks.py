@@ -64,7 +64,8 @@ def _check_not_entity_xml(path: Path) -> None:
         raise InputError(path, "header", "declares a DOCTYPE/ENTITY", "remove the DTD declarations")
 
 
-def _polyline_cumlen(shape: np.ndarray) -> np.ndarray:
+def polyline_cumlen(shape: np.ndarray) -> np.ndarray:
+    """Arc length (m) at each vertex of the polyline ``shape`` ((N, 2) m): (N,), from 0."""
     seg = np.hypot(*np.diff(shape, axis=0).T) if len(shape) > 1 else np.zeros(0)
     return np.concatenate([[0.0], np.cumsum(seg)])
 
@@ -181,7 +182,7 @@ class RoadNet:
             shape = self.lane_shape[lid]
             if len(shape) < 2:
                 continue
-            cum = _polyline_cumlen(shape)
+            cum = polyline_cumlen(shape)
             a.append(shape[:-1])
             b.append(shape[1:])
             lane_idx.append(np.full(len(shape) - 1, i))
@@ -236,7 +237,7 @@ class RoadNet:
         """Cumulative shape length (m) at each point of a lane (cached)."""
         cum = self._cum_cache.get(lane)
         if cum is None:
-            cum = self._cum_cache[lane] = _polyline_cumlen(self.lane_shape[lane])
+            cum = self._cum_cache[lane] = polyline_cumlen(self.lane_shape[lane])
         return cum
 
     def lane_pose(self, lane: str, pos: float) -> tuple[float, float, float]:

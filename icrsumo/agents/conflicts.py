@@ -17,7 +17,7 @@ import numpy as np
 from shapely.geometry import LineString
 from shapely.ops import nearest_points
 
-from ..networks import Connection, RoadNet
+from ..networks import Connection, RoadNet, polyline_cumlen
 
 #: m between two internal lanes' centre lines below which they conflict (two car widths)
 CONFLICT_M = 2.0
@@ -49,10 +49,6 @@ def junction_of(lane: str) -> str:
 def _chain(net: RoadNet, conn: Connection) -> np.ndarray:
     parts = [net.lane_shape[v] for v in conn.via_chain]
     return np.concatenate(parts) if parts else np.zeros((0, 2))
-
-
-def _arc(points: np.ndarray) -> np.ndarray:
-    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
 
 
 class ConflictMap:
@@ -107,9 +103,9 @@ class ConflictMap:
             path = np.concatenate([tail, theirs])
             keep = np.concatenate([[True], np.hypot(*np.diff(path, axis=0).T) > 1e-3])
             path = path[keep]
-            entry = float(_arc(tail)[-1]) if len(tail) > 1 else 0.0
+            entry = float(polyline_cumlen(tail)[-1]) if len(tail) > 1 else 0.0
             found.append(Conflict(foe=foe, merge=merge, s_ours=float(s_ours), s_foe=entry + float(s_foe_via),
-                                  path=path, cum=_arc(path), entry=entry))
+                                  path=path, cum=polyline_cumlen(path), entry=entry))
         return tuple(found)
 
 

@@ -235,7 +235,7 @@ class PathDriver(ABC):
                     pieces.append(_Piece(f"{edge}_{cur}", start, length))
                     hold = total + max(0.0, length - start - WAIT_BEFORE_END)
                     break
-                ends = self._change_ends(edge, cur, want, start, length, first)
+                ends = self._change_ends(edge, cur, want, start, length, first, committed)
                 pieces.append(_Piece(f"{edge}_{cur}", start, start))
                 pieces += [_Piece(f"{edge}_{cur + step * (k + 1)}", e, e) for k, e in enumerate(ends[:-1])]
                 conn = min((c for c in conns if c.from_lane == want),
@@ -273,24 +273,22 @@ class PathDriver(ABC):
         return tuple(c for c in conns if c.to_lane in good) or conns
 
     def _change_ends(self, edge: str, cur: int, want: int, start: float, length: float,
-                     first: bool) -> list[float]:
+                     first: bool, committed: bool) -> list[float]:
         """Lane positions (m) where each one-lane step of a change ``cur`` -> ``want`` on ``edge``
-        ends. The first step of a change under way keeps its end (a replan from the lane SUMO
-        reports must not push the goal ahead, or the change never completes)."""
+        ends. The first step of a change under way (``committed``) keeps its end: a replan from
+        the lane SUMO reports must not push the goal ahead, or the change never completes."""
         n = abs(want - cur)
         step = float(np.clip((length - start - 5.0) / n, 3.0, LANE_CHANGE_M))
-        nxt_lane = cur + (1 if want > cur else -1)
         ends: list[float] = []
         e = start
         for k in range(n):
-            if k == 0 and first and self._change is not None and self._change[:2] == (edge, nxt_lane) \
-                    and self._change[2] - start > 2.0:
+            if k == 0 and committed and self._change[2] - start > 2.0:
                 e = self._change[2]
             else:
                 e = min(e + step, length)
             ends.append(e)
         if first:
-            self._change = (edge, nxt_lane, ends[0])
+            self._change = (edge, cur + (1 if want > cur else -1), ends[0])
         return ends
 
     def _make_path(self, pieces: list[_Piece], w: World) -> _Path:
@@ -408,13 +406,12 @@ class PathDriver(ABC):
     def _yields_to(self, w: World, conn: Connection, foe: Connection) -> int:
         """How ``conn`` meets an approaching vehicle on ``foe``: 1 gives way (the foe's link
         ranks higher, :meth:`_rank`), 0 first come first served (equal rank), -1 goes first."""
-        return int(np.sign(self._rank(w, foe) - self._rank(w, conn)))
+        theirs, ours = self._rank(w, foe), self._rank(w, conn)
+        return (theirs > ours) - (theirs < ours)
 
     def _yield_stop(self, w: World, path: _Path) -> float:
         """Arc position (m) before which the ego stops for junction traffic at the junctions
         within :data:`YIELD_LOOKAHEAD` m (see :meth:`_junction_stop`)."""
-        if len(w.vehicles) == 0:
-            return math.inf
         return min((self._junction_stop(w, conn, s_entry) for s_entry, conn in path.junctions
                     if s_entry <= YIELD_LOOKAHEAD), default=math.inf)
 

@@ -103,9 +103,8 @@ def prepare_suite(opts: EvalOptions) -> PreparedSuite:
     for line in skipped:
         print(f"icrsumo: skipped: {line}", file=sys.stderr)
     instr_dir = out / "instructions"
-    if bank is not None and bank.set_aside:
-        print(f"icrsumo: note: {bank.path}: {len(bank.set_aside)} phrasing(s) set aside, read as another "
-              f"maneuver (first: {bank.set_aside[0].line()})", file=sys.stderr)
+    if bank is not None and bank.note():
+        print(bank.note(), file=sys.stderr)
     written, failures = generate(scenarios, instr_dir, GenerateOptions(
         families=FAMILIES, k=opts.k, seed=opts.seed, workers=1, baseline_bank=bank))
     for line in failures:

@@ -31,6 +31,7 @@ import json
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 from ..errors import InputError
@@ -197,6 +198,14 @@ class BaselineBank:
             return None
         return self.usable.get((itype, _slot_value(slots or {}))) or None
 
+    def note(self) -> str | None:
+        """The one stderr line that says which phrasings are not used (None: all are)."""
+        if not self.set_aside:
+            return None
+        n = len(self.set_aside)
+        return (f"icrsumo: note: {self.path}: {n} phrasing{'s' if n > 1 else ''} set aside, read as "
+                f"another maneuver (first: {self.set_aside[0].line()})")
+
     def describe(self) -> dict:
         """What the instruction index records about the bank."""
         return {"file": self.path.name, "sha256": self.sha256,
@@ -292,8 +301,22 @@ def _check_phrasing(path: Path, place: str, lid: str, text: object) -> str:
 
 def load_baseline_bank(path: str | Path) -> BaselineBank:
     """Read and validate a LangAuto-style instruction dictionary (see the module docstring);
-    an InputError naming the file and the place for the first problem."""
+    an InputError naming the file and the place for the first problem. A file is read once
+    while it is unchanged (options check it, the run then uses it)."""
     path = Path(path)
+    try:
+        st = path.stat()
+    except OSError:
+        return _load(path)  # names the problem
+    return _load_cached(path, st.st_mtime_ns, st.st_size)
+
+
+@lru_cache(maxsize=8)
+def _load_cached(path: Path, mtime_ns: int, size: int) -> BaselineBank:
+    return _load(path)
+
+
+def _load(path: Path) -> BaselineBank:
     raw, text = _read(path)
     data = _parse(path, text)
     phrasings: dict[str, tuple[str, ...]] = {}
