@@ -130,7 +130,10 @@ class Maneuver:
     lane_change_left, lane_change_right or follow. ``junction``: the junction kind
     (traffic_light, stop_sign, t_junction, crossroad, roundabout, highway_entry, highway_exit,
     junction) or "" for lane changes and follow stretches. ``exit`` is the roundabout exit
-    number (1 = first), ``length`` the extent (m) of a follow stretch.
+    number (1 = first), ``length`` the extent (m) of a follow stretch. ``end`` is the route
+    position (m) where the maneuver is over: the end of the junction's internal lanes (for a
+    roundabout, of the exit junction's); 0 for lane changes and follow stretches. ``lanes`` is
+    the number of lanes a lane change crosses (0 for the other kinds).
     """
 
     kind: str
@@ -140,6 +143,8 @@ class Maneuver:
     junction_id: str = ""
     exit: int = 0
     length: float = 0.0
+    end: float = 0.0
+    lanes: int = 0
 
 
 @dataclass(frozen=True)

@@ -43,6 +43,23 @@ def test_carla_towns_have_sidewalks_and_crossings():
         assert walking, town
 
 
+def test_only_real_roundabouts_are_marked():
+    """Town03's roundabout (ring radius 18-29 m) stays marked; Town06's highway loop (73-90 m),
+    which the source networks mark as a roundabout, is not one."""
+    import numpy as np
+
+    marked = {}
+    for town in CARLA_TOWNS:
+        sn = load_net(bundled_towns()[town]).sumolib_net
+        for r in sn.getRoundabouts():
+            xy = np.array([sn.getNode(n).getCoord()[:2] for n in r.getNodes()])
+            radius = float(np.hypot(*(xy - xy.mean(axis=0)).T).max())
+            assert radius <= 50.0, (town, r.getEdges(), radius)
+            marked[town] = marked.get(town, 0) + 1
+    assert marked == {"Town03": 1}
+    assert not load_net(bundled_towns()["Town06"]).roundabout_edges
+
+
 @pytest.mark.skipif(not (SHARED / "carla").is_dir(), reason="needs ../shared/carla (the source networks)")
 def test_carla_towns_regenerate_byte_identical(tmp_path):
     subprocess.run([sys.executable, str(ROOT / "tools" / "make_carla_networks.py"), "--out", str(tmp_path)],

@@ -9,7 +9,11 @@ only. This script runs SUMO's netconvert on each with the fixed options in :data
 sidewalks guessed along urban streets (speed limit 5.8-13.89 m/s, netconvert's defaults) and
 pedestrian crossings and walking areas guessed at their junctions, so that pedestrians walk
 and cross as in icrsumo's own towns; everything else (geometry, lanes, connections, traffic
-lights, the netOffset that maps CARLA coordinates to SUMO's) is kept. The leading
+lights, the netOffset that maps CARLA coordinates to SUMO's) is kept, except roundabouts that
+are none: a ``<roundabout>`` whose ring nodes lie more than :data:`ROUNDABOUT_MAX_RADIUS_M`
+from their centroid (Town06's highway loop, 73-90 m, guessed by the source's conversion) is
+dropped, so that no instruction calls it a roundabout; Town03's roundabout (18-29 m) stays.
+The leading
 ``<!-- generated on ... -->`` comment (date, paths) is stripped, so the output is
 byte-identical on every run (tested). The licence notice and a README with the credit are
 copied next to the networks.
@@ -42,6 +46,8 @@ OPTIONS = [
     "--output.street-names", "false",
     "--xml-validation", "never",
 ]
+#: ring nodes farther than this (m) from their centroid: not a roundabout
+ROUNDABOUT_MAX_RADIUS_M = 50.0
 NOTICE = "LICENSE-CARLA.txt"
 README = """# CARLA's LangAuto towns (bundled)
 
@@ -53,9 +59,33 @@ in the Scenic project's repository, `assets/maps/CARLA/`), from the CARLA projec
 distributed under CC-BY: credit the CARLA project when you use or redistribute them.
 
 icrsumo changed them only by running netconvert once more (`tools/make_carla_networks.py`):
-guessed sidewalks, pedestrian crossings and walking areas were added; lanes, geometry,
-connections, traffic lights and the CARLA coordinate offset are unchanged.
+guessed sidewalks, pedestrian crossings and walking areas were added, and Town06's highway
+loop (ring radius 73-90 m), which the source marked as a roundabout, is no longer marked as
+one; lanes, geometry, connections, traffic lights and the CARLA coordinate offset are
+unchanged.
 """
+
+
+def drop_false_roundabouts(text: str, net_path: Path) -> str:
+    """``text`` (the network file at ``net_path``) without the ``<roundabout>`` elements whose
+    ring nodes lie more than ROUNDABOUT_MAX_RADIUS_M (m) from their centroid."""
+    import numpy as np
+    import sumolib
+
+    net = sumolib.net.readNet(str(net_path))
+    for r in net.getRoundabouts():
+        xy = np.array([net.getNode(n).getCoord()[:2] for n in r.getNodes()], dtype=float)
+        if np.hypot(*(xy - xy.mean(axis=0)).T).max() > ROUNDABOUT_MAX_RADIUS_M:
+            ring = f'edges="{" ".join(r.getEdges())}"'
+            lines = text.splitlines(keepends=True)
+            hits = [i for i, ln in enumerate(lines)
+                    if ln.lstrip().startswith("<roundabout ") and ring in ln]
+            if len(hits) != 1:
+                raise SystemExit(f"{net_path}: roundabout {ring} found {len(hits)} times, expected once")
+            del lines[hits[0]]
+            text = "".join(lines)
+    return text
+
 
 
 def convert(src: Path, dst: Path) -> None:
@@ -66,7 +96,8 @@ def convert(src: Path, dst: Path) -> None:
                              capture_output=True, text=True, env=env)
         if res.returncode != 0:
             raise SystemExit(f"netconvert failed on {src}: {res.stderr.strip()[-2000:]}")
-        write_atomic(dst, strip_header_comments(out.read_text(encoding="utf-8")))
+        text = strip_header_comments(out.read_text(encoding="utf-8"))
+        write_atomic(dst, drop_false_roundabouts(text, out))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -9,8 +9,13 @@ Layout along the route (positions in m):
   (``turn_traffic_light``, ``turn_t_junction``, ``roundabout_exit``, ...) 20 m before;
   otherwise one instruction 50 m before (or as soon as the previous maneuver is done);
 - lane changes at the start of the edge where the route needs them, with the distance left to
-  the junction where the lane matters when that is 30 m or more;
+  the junction where the lane matters when that is 30 m or more, kept on for 30 m per lane to
+  cross (at most half the room before that junction);
 - follow instructions over gaps of 30 m or more between maneuvers and after the last one;
+- no instruction replaces a junction maneuver's before the ego has left that junction (its
+  internal lanes' end plus 5 m; for a roundabout, the exit junction's), unless the next
+  junction comes sooner: then the next instruction starts at the exit, or 5 m before the next
+  junction, whichever is later;
 - notices beside the instructions: traffic lights and stop signs 40 m before the junction,
   pedestrians at signalised or stop-controlled junctions with crossings.
 
@@ -38,7 +43,11 @@ FAR_M, NEAR_M, SINGLE_M = 80.0, 20.0, 50.0
 TWO_STAGE_ROOM_M = 35.0
 FOLLOW_GAP_M = 30.0
 AFTER_M = 10.0
+#: distance (m) past a junction's exit before the next instruction replaces its maneuver's
+AFTER_EXIT_M = 5.0
 NOTICE_M = 40.0
+#: distance (m) a lane change instruction stays on before the next one, per lane to cross
+LANE_CHANGE_M = 30.0
 HIGHWAY_EXIT_FAR_M = 150.0
 #: second seed word of the Generator that draws --baseline-bank phrasings ("LANG")
 LANGAUTO_STREAM = 0x4C414E47
@@ -135,7 +144,12 @@ def build_baseline(
         else:
             b.add(base, at, Intent.FOLLOW)
 
+    exit_pos = 0.0  # where the last junction maneuver's junction was left (m)
     for m in maneuvers:
+        if not m.kind.startswith("lane_change") and m.pos < cursor:
+            # the junction comes soon after the last maneuver: announce it as soon as the
+            # last junction is left, at the latest 5 m before this one
+            cursor = max(exit_pos, min(cursor, m.pos - AFTER_EXIT_M))
         if m.kind.startswith("lane_change"):
             side = "left" if m.intent == Intent.LANE_LEFT else "right"
             deadline = next((t.pos for t in turns if t.pos > m.pos), length)
@@ -144,8 +158,9 @@ def build_baseline(
                 b.add("lane_change_distance", max(cursor, m.pos), m.intent, m, distance=room, side=side)
             else:
                 b.add("lane_change", max(cursor, m.pos), m.intent, m, side=side)
-            # leave the lane change on screen for a while before the next announcement
-            cursor = max(cursor, m.pos) + min(30.0, max(1.0, 0.5 * room))
+            # leave the lane change on screen for a while (30 m per lane to cross) before the
+            # next announcement
+            cursor = max(cursor, m.pos) + min(LANE_CHANGE_M * max(m.lanes, 1), max(1.0, 0.5 * room))
             continue
         far_m = HIGHWAY_EXIT_FAR_M if m.kind == "highway_exit" else FAR_M
         far = _far_type(m)
@@ -160,7 +175,8 @@ def build_baseline(
         else:
             itype, slots = _near_type(m)
             b.add(itype, announce, m.intent, m, **slots)
-        cursor = m.pos + AFTER_M
+        exit_pos = max(m.pos, m.end)
+        cursor = max(m.pos + AFTER_M, m.end + AFTER_EXIT_M)
     if length - cursor >= FOLLOW_GAP_M or not b.items:
         follow(min(cursor, length), length)
 
@@ -173,7 +189,7 @@ def build_baseline(
             if ok:
                 notices.append(Notice(
                     id=len(notices), trigger=round(max(0.0, m.pos - NOTICE_M), 2),
-                    end=round(m.pos + AFTER_M, 2), text=b.text(ntype, {}),
+                    end=round(max(m.pos + AFTER_M, m.end), 2), text=b.text(ntype, {}),
                     type=ntype, intent=Intent.STOP,
                 ))
     return InstructionSet(route_id=route_id, family=Family.BASELINE, k=0, seed=seed,

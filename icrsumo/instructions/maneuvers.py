@@ -44,6 +44,16 @@ def is_highway(net: RoadNet, edge: str) -> bool:
     return net.edge_speed.get(edge, 0.0) >= HIGHWAY_SPEED
 
 
+def junction_exit(net: RoadNet, j: dict) -> float:
+    """Route position (m) where the ego leaves junction pass ``j`` (a manifest junction entry):
+    its entry ``pos`` plus the length of the internal lanes of the connection it uses."""
+    conns = net.connections.get((j["from_edge"], j["to_edge"]), ())
+    via = next((c.via_length for c in conns
+                if c.from_lane == j["from_lane"] and c.to_lane == j["to_lane"]),
+               max((c.via_length for c in conns), default=0.0))
+    return round(float(j["pos"]) + via, 2)
+
+
 def extract_maneuvers(scenario: Scenario, net: RoadNet) -> list[Maneuver]:
     """Junction maneuvers (where the route has a choice, or enters / leaves a highway) and the
     lane changes it requires, sorted by route position. Follow stretches are the gaps between
@@ -65,25 +75,27 @@ def extract_maneuvers(scenario: Scenario, net: RoadNet) -> list[Maneuver]:
                     break
                 k += 1
             exit_no = max(exit_no, 1)
+            last = junctions[min(k, len(junctions) - 1)]
             out.append(Maneuver("roundabout", j["pos"], roundabout_intent(exit_no), "roundabout",
-                                j["junction"], exit=exit_no))
+                                j["junction"], exit=exit_no, end=junction_exit(net, last)))
             i = k + 1
             continue
         from_hw, to_hw = is_highway(net, j["from_edge"]), is_highway(net, j["to_edge"])
         if to_hw and not from_hw:
             out.append(Maneuver("highway_enter", j["pos"], Intent.FOLLOW, "highway_entry",
-                                j["junction"]))
+                                j["junction"], end=junction_exit(net, j)))
         elif from_hw and not to_hw and j["choice"]:
             out.append(Maneuver("highway_exit", j["pos"], Intent.RIGHT, "highway_exit",
-                                j["junction"]))
+                                j["junction"], end=junction_exit(net, j)))
         elif j["choice"]:
             kind, intent = _TURN.get(j["direction"], ("straight", Intent.STRAIGHT))
             out.append(Maneuver(kind, j["pos"], intent, junction_kind(net, j["junction"]),
-                                j["junction"]))
+                                j["junction"], end=junction_exit(net, j)))
         i += 1
     for c in scenario.manifest["lane_changes"]:
         left = c["to_lane"] > c["from_lane"]
         out.append(Maneuver("lane_change_left" if left else "lane_change_right", c["pos"],
-                            Intent.LANE_LEFT if left else Intent.LANE_RIGHT))
+                            Intent.LANE_LEFT if left else Intent.LANE_RIGHT,
+                            lanes=abs(int(c["to_lane"]) - int(c["from_lane"]))))
     out.sort(key=lambda m: (m.pos, m.kind))
     return out
