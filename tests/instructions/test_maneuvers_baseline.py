@@ -123,3 +123,27 @@ def test_a_wide_junction_keeps_its_instruction_until_it_is_left():
     nxt = next(i for i in ins if i.maneuver_pos == 143.0)
     assert nxt.trigger == 140.0 and nxt.intent == Intent.RIGHT
     assert all(i.maneuver_pos == 100.0 for i in ins if 100.0 < i.trigger < 140.0)
+
+
+def test_a_lane_change_stays_on_30_m_per_lane_to_cross():
+    turn = Maneuver("turn_right", 400.0, Intent.RIGHT, "crossroad", "j1", end=415.0)
+    for lanes, on_for in ((1, 30.0), (2, 60.0), (3, 90.0)):
+        change = Maneuver("lane_change_right", 100.0, Intent.LANE_RIGHT, lanes=lanes)
+        ins = _sequence([change, turn])
+        i = next(k for k, x in enumerate(ins) if x.intent == Intent.LANE_RIGHT)
+        assert ins[i].trigger == 100.0 and ins[i + 1].trigger == 100.0 + on_for
+    # never longer than half the room before the junction where the lane matters
+    change = Maneuver("lane_change_right", 300.0, Intent.LANE_RIGHT, lanes=3)
+    ins = _sequence([change, turn])
+    i = next(k for k, x in enumerate(ins) if x.intent == Intent.LANE_RIGHT)
+    assert ins[i + 1].trigger == 350.0
+
+
+def test_lane_changes_count_the_lanes_they_cross(converted):
+    seen = set()
+    for _, sc, ms in _all(converted):
+        changes = sc.manifest["lane_changes"]
+        got = [m for m in ms if m.kind.startswith("lane_change")]
+        assert sorted(m.lanes for m in got) == sorted(abs(c["to_lane"] - c["from_lane"]) for c in changes)
+        seen.update(m.lanes for m in got)
+    assert 1 in seen
