@@ -87,7 +87,6 @@ def drop_false_roundabouts(text: str, net_path: Path) -> str:
     return text
 
 
-
 def convert(src: Path, dst: Path) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / dst.name

@@ -146,10 +146,6 @@ def build_baseline(
 
     exit_pos = 0.0  # where the last junction maneuver's junction was left (m)
     for m in maneuvers:
-        if not m.kind.startswith("lane_change") and m.pos < cursor:
-            # the junction comes soon after the last maneuver: announce it as soon as the
-            # last junction is left, at the latest 5 m before this one
-            cursor = max(exit_pos, min(cursor, m.pos - AFTER_EXIT_M))
         if m.kind.startswith("lane_change"):
             side = "left" if m.intent == Intent.LANE_LEFT else "right"
             deadline = next((t.pos for t in turns if t.pos > m.pos), length)
@@ -162,6 +158,10 @@ def build_baseline(
             # next announcement
             cursor = max(cursor, m.pos) + min(LANE_CHANGE_M * max(m.lanes, 1), max(1.0, 0.5 * room))
             continue
+        if m.pos < cursor:
+            # the junction comes soon after the last maneuver: announce it as soon as the
+            # last junction is left, at the latest 5 m before this one
+            cursor = max(exit_pos, min(cursor, m.pos - AFTER_EXIT_M))
         far_m = HIGHWAY_EXIT_FAR_M if m.kind == "highway_exit" else FAR_M
         far = _far_type(m)
         announce = max(cursor, m.pos - (far_m if far else SINGLE_M))
