@@ -3,7 +3,7 @@
 # (the lent GPU machine's CPU cores): pack libsumo there in parts that each fit one transfer,
 # then unpack and run. This is how LangAuto-long's learned-agent table in the README was run.
 #
-# Here (with network), from the repository root:
+# Here (with network, the project's venv active), from the repository root:
 #   bash tools/portable_sumo.sh pack DIR [PYVER]      # PYVER of the target, default 3.12
 # writes DIR/part-1 (libsumo, first 40 MB), DIR/part-2 (the rest, the pure-Python wheels and
 # the X/GL client libraries libsumo links against), each under 64 MiB with the checkout.
