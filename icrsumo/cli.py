@@ -7,6 +7,7 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import NoReturn
 
 from . import __version__
 from .errors import InputError
@@ -101,6 +102,17 @@ def _cmd_run_episode(args: argparse.Namespace) -> int:
     return 0
 
 
+def _port(text: str) -> int:
+    """A TCP port, 0..65535 (argparse type)."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a port number: {text!r}") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is out of range (use 0 to 65535; 0: any free port)")
+    return port
+
+
 def _split_list(items: list[str] | None) -> tuple[str, ...]:
     return tuple(x for item in items or [] for x in item.split(",") if x)
 
@@ -116,9 +128,11 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         traffic=args.traffic, rollout_route=args.rollout_route, agent_timeout=args.agent_timeout or None,
         batch_inference=args.batch_inference, max_batch=args.max_batch,
         inference_processes=args.inference_processes, baseline_bank=args.baseline_bank,
+        retry_crashed=args.retry_crashed,
     )
-    print(f"{result.done} episodes done, {result.crashed} crashed, {time.perf_counter() - t0:.0f} s -> "
-          f"{args.out}", file=sys.stderr)
+    again = " (stored as crashed: rerun with --retry-crashed to run them again)" if result.crashed else ""
+    print(f"{result.done} episodes done, {result.crashed} crashed{again}, {time.perf_counter() - t0:.0f} s "
+          f"-> {args.out}", file=sys.stderr)
     return 0
 
 
@@ -178,12 +192,21 @@ def _cmd_serve_agent(args: argparse.Namespace) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line (no usage block), exit status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (fix: see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="icrsumo",
         description="Instruction-robustness benchmark for language-conditioned driving on SUMO.",
     )
     parser.add_argument("--version", action="version", version=f"icrsumo {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the traceback of an error instead of its one line")
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser(
@@ -293,6 +316,9 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--agent-timeout", type=float, default=60.0, metavar="S",
                    help="seconds an agent's reset/act call may take before the episode is stored as "
                    "crashed (default 60; 0: no limit)")
+    v.add_argument("--retry-crashed", action="store_true",
+                   help="run the episodes stored as crashed again (after a transient fault: a remote "
+                   "server that was down, a wrong device)")
     v.set_defaults(func=_cmd_evaluate)
 
     r = sub.add_parser("report", help="rebuild summary, tables and figures of an evaluation folder")
@@ -322,7 +348,7 @@ def build_parser() -> argparse.ArgumentParser:
         "with icrsumo evaluate --agent remote:http://HOST:PORT.",
     )
     sa.add_argument("spec", help="built-in name, module:Class or path/file.py:Class (not privileged)")
-    sa.add_argument("--port", type=int, default=8765, help="TCP port (default 8765; 0: any free port)")
+    sa.add_argument("--port", type=_port, default=8765, help="TCP port (default 8765; 0: any free port)")
     sa.add_argument("--host", default="127.0.0.1",
                     help="address to bind (default 127.0.0.1; 0.0.0.0 exposes the agent to the network)")
     sa.add_argument("--max-batch", type=int, default=8, help="act requests per batch at most (default 8)")
@@ -364,20 +390,47 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--seed", type=int, help="override the config's seed")
     t.add_argument("--device", help="auto (default), cpu or cuda")
     t.set_defaults(func=_cmd_train)
+    for command in sub.choices.values():  # --debug also after the subcommand
+        command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                             help="show the traceback of an error instead of its one line")
     return parser
 
 
+#: subcommands whose --out is a folder they write (checked before they start)
+_WRITES_OUT = ("convert-routes", "generate", "evaluate", "collect", "train")
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; bad input gives one line on stderr and exit status 2."""
-    args = build_parser().parse_args(argv)
+    """Entry point. Bad input gives one line on stderr and exit status 2; so does any other
+    failure that reaches this point (a last resort: one line, never a traceback, unless
+    ``--debug``)."""
     try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as done:  # --help, --version, or a one-line usage error (status 2)
+        return int(done.code or 0)
+    try:
+        if args.command in _WRITES_OUT:
+            from .fsio import check_out_dir
+
+            check_out_dir(Path(args.out))
         return args.func(args)
     except InputError as err:
+        if args.debug:
+            raise
         print(f"icrsumo: error: {err.line()}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("icrsumo: interrupted", file=sys.stderr)
         return 130
+    except Exception as err:  # the last resort: still one line
+        if args.debug:
+            raise
+        from .errors import describe
+
+        print(f"icrsumo: error: {' '.join(describe(err).split())} (fix: check the files and options "
+              f"named in the command; rerun with --debug for the traceback and report it if the input "
+              f"is right)", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -25,13 +25,13 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from .errors import InputError
-from .fsio import dumps_json, replace_dir_atomic, sha256_file, write_atomic
+from .errors import InputError, check_seed
+from .fsio import check_out_dir, dumps_json, replace_dir_atomic, sha256_file, write_atomic
 from .networks import convert_xodr, load_net
 from .resources import bundled_towns
 from .routes import read_routes
 from .routing import MatchError, plan_route
-from .scenario import MANIFEST, SCENARIO_FORMAT
+from .scenario import MANIFEST, SCENARIO_FORMAT, read_scenario
 from .traffic import TRAFFIC_LEVELS, make_traffic
 from .types import RouteSpec
 
@@ -66,12 +66,14 @@ class ConvertOptions:
         if sum(x is not None for x in (self.net, self.xodr, self.net_dir)) > 1:
             raise InputError("--net/--xodr/--net-dir", "", "more than one network source given",
                              "give only one of --net, --xodr, --net-dir")
-        if not self.max_snap > 0:
-            raise InputError("--max-snap", "", "must be positive", "give a distance in metres")
-        if self.warmup < 0:
-            raise InputError("--warmup", "", "must not be negative", "give seconds >= 0")
+        if not 0 < self.max_snap <= 1000:
+            raise InputError("--max-snap", "", f"{self.max_snap:g} is not in (0, 1000]",
+                             "give a distance in metres")
+        if not 0 <= self.warmup <= 3600:
+            raise InputError("--warmup", "", f"{self.warmup:g} is not in [0, 3600]", "give seconds >= 0")
         if self.workers < 1:
             raise InputError("--workers", "", "must be at least 1", "give a positive count")
+        check_seed(self.seed)
 
 
 @dataclass
@@ -107,8 +109,7 @@ def _resolve_nets(
     resolved: dict[str, tuple[Path, str]] = {}
     errors: dict[str, InputError] = {}
     if opts.net is not None:
-        if not Path(opts.net).is_file():
-            raise InputError(opts.net, "", "network file not found", "check the --net path")
+        load_net(Path(opts.net))  # a user's net is read whole before anything is copied
         name = Path(opts.net).name.removesuffix(".xml").removesuffix(".net")
         return {s.id: (Path(opts.net), name) for s in specs}, errors
     if opts.xodr is not None:
@@ -123,9 +124,15 @@ def _resolve_nets(
             continue
         if opts.net_dir is not None:
             d = Path(opts.net_dir)
+            if not d.is_dir():
+                raise InputError(d, "", "--net-dir folder not found", "check the --net-dir path")
             net_file, xodr = d / f"{s.town}.net.xml", d / f"{s.town}.xodr"
             if net_file.is_file():
-                resolved[s.id] = (net_file, s.town)
+                try:
+                    load_net(net_file)  # read whole before anything is copied
+                    resolved[s.id] = (net_file, s.town)
+                except InputError as err:
+                    errors[s.id] = err
             elif xodr.is_file():
                 try:
                     resolved[s.id] = (convert_xodr(xodr, net_store), s.town)
@@ -223,10 +230,12 @@ def _convert_one(
         source_hash = _source_hash(spec, net.sha256, opts)
         old = final / MANIFEST
         if old.is_file():
-            try:
-                if json.loads(old.read_text(encoding="utf-8")).get("source_hash") == source_hash:
+            try:  # a damaged old manifest is converted anew
+                old_doc = json.loads(old.read_text(encoding="utf-8"))
+                if isinstance(old_doc, dict) and old_doc.get("source_hash") == source_hash:
+                    read_scenario(final)  # still whole: its files and network are there
                     return "reused", name, ""
-            except (OSError, json.JSONDecodeError):
+            except (OSError, ValueError, RecursionError, InputError):
                 pass
         pts = [net.to_sumo(w.x, w.y, w.yaw, opts.coords) for w in spec.waypoints]
         try:
@@ -299,13 +308,16 @@ def convert_routes(routes_file: Path, out_dir: Path, opts: ConvertOptions) -> Co
     opts.check()
     routes_file = Path(routes_file)
     out_dir = Path(out_dir)
+    check_out_dir(out_dir)
     specs, parse_errors = read_routes(routes_file)
     net_store = out_dir / "networks"
+    # a user's network is read whole (load_net: unsafe XML, not a SUMO network) before anything
+    # is copied or written into OUT; only netconvert's output of an OpenDRIVE file lands there
+    resolved, net_errors = _resolve_nets(specs, opts, routes_file, net_store)
     net_store.mkdir(parents=True, exist_ok=True)
     (out_dir / "scenarios").mkdir(parents=True, exist_ok=True)
     for stale in (out_dir / "scenarios").glob(".*"):  # staging left by a killed run
         shutil.rmtree(stale, ignore_errors=True)
-    resolved, net_errors = _resolve_nets(specs, opts, routes_file, net_store)
     placed: dict[Path, Path] = {}
     jobs = []
     for s in specs:

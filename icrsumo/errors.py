@@ -25,6 +25,17 @@ class InputError(Exception):
         return " ".join(text.split())
 
 
+def short(value: object, limit: int = 40) -> str:
+    """``repr(value)``, cut in the middle when longer than ``limit`` characters (a 400-digit
+    number or a megabyte-long id stays one short line)."""
+    text = value if isinstance(value, str) else repr(value)
+    text = repr(text) if isinstance(value, str) else text
+    if len(text) <= limit:
+        return text
+    n = len(value) if isinstance(value, str) else len(text)
+    return f"{text[:limit * 2 // 3]}...{text[-(limit // 3):]} ({n} characters)"
+
+
 def describe(err: BaseException) -> str:
     """``Type: message at file.py:line`` (the innermost frame): how a failure that is stored or
     sent on (a crashed episode, an agent server's answer) names itself in one line."""
@@ -33,3 +44,40 @@ def describe(err: BaseException) -> str:
     tb = traceback.extract_tb(err.__traceback__)
     where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
     return f"{type(err).__name__}: {err}{where}"
+
+
+def expect(value: object, kind: type | tuple[type, ...], file: object, place: str, what: str,
+           fix: str = "") -> object:
+    """``value`` if it is of ``kind`` (a bool is not an int or a float here), else an
+    InputError: ``file``: ``place``: ``what`` must be <kind>, not <its type> (fix: ``fix``)."""
+    kinds = kind if isinstance(kind, tuple) else (kind,)
+    ok = isinstance(value, kinds) and not (isinstance(value, bool) and bool not in kinds)
+    if not ok:
+        names = {int: "an integer", float: "a number", str: "a string", list: "a list", dict: "an object",
+                 bool: "true or false"}
+        want = " or ".join(names.get(k, k.__name__) for k in kinds)
+        got = "null" if value is None else type(value).__name__
+        raise InputError(file, place, f"{what} must be {want}, not {got}", fix)
+    return value
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C from the user while an evaluation runs agents in its own process: unlike a
+    ``KeyboardInterrupt`` (or ``SystemExit``) raised by agent code, which is an agent crash
+    like any other, it stops the evaluation."""
+
+
+def raise_interrupted(signum: int, frame: object) -> None:
+    """A SIGINT handler that raises :class:`Interrupted`."""
+    raise Interrupted()
+
+
+#: the largest seed: seeds are stored as SQLite integers and feed numpy's generators
+MAX_SEED = 2**63 - 1
+
+
+def check_seed(seed: object, option: str = "--seed") -> int:
+    """``seed`` when it is a whole number in 0 .. :data:`MAX_SEED`, else an InputError."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise InputError(option, short(seed), "out of range", "use a whole number from 0 to 2**63 - 1")
+    return seed

@@ -22,22 +22,99 @@ def dumps_json(obj: Any) -> str:
     return text + "\n"
 
 
-def read_json_doc(path: Path, fmt: str, what: str, fix: str) -> dict:
-    """A JSON document whose ``format`` key must be ``fmt``; problems are InputErrors naming
-    the file (``what`` names the document, ``fix`` the command that writes it)."""
+#: byte-order marks of encodings other than UTF-8, longest first
+BOMS = ((b"\xff\xfe\x00\x00", "UTF-32"), (b"\x00\x00\xfe\xff", "UTF-32"), (b"\xff\xfe", "UTF-16"),
+         (b"\xfe\xff", "UTF-16"))
+
+
+def read_text(path: Path, what: str, fix: str = "") -> str:
+    """The UTF-8 text of a user's file (a UTF-8 byte-order mark is dropped); InputErrors for a
+    missing file, a folder, no permission, and text that is not UTF-8 (UTF-16 named as such).
+    ``what`` names the file in the message ("template bank"), ``fix`` says how to get it right."""
     from .errors import InputError
 
     path = Path(path)
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        raw = path.read_bytes()
     except FileNotFoundError:
-        raise InputError(path, "", f"{what} not found", fix) from None
+        raise InputError(path, "", f"{what} not found", fix or "check the path") from None
+    except IsADirectoryError:
+        raise InputError(path, "", f"is a folder, not a {what} file", fix or "pass the file") from None
+    except PermissionError:
+        raise InputError(path, "", f"{what} is not readable (permission denied)",
+                         "check the file's permissions") from None
+    except OSError as err:
+        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})", fix) from None
+    for bom, name in BOMS:
+        if raw.startswith(bom):
+            raise InputError(path, "", f"{what} is {name}-encoded, not UTF-8", "save it as UTF-8")
+    nul = raw.find(b"\x00")
+    if nul >= 0:
+        line = raw[:nul].count(b"\n") + 1
+        raise InputError(path, f"line {line}", f"{what} holds NUL bytes (UTF-16 without a byte-order mark?)",
+                         "save it as UTF-8")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        line = raw[:err.start].count(b"\n") + 1
+        raise InputError(path, f"line {line}", f"{what} is not UTF-8 text (byte {err.start})",
+                         "save it as UTF-8") from None
+
+
+def _no_constants(name: str) -> Any:
+    raise ValueError(f"{name} is not a JSON number")
+
+
+def read_json(path: Path, what: str, fix: str = "") -> Any:
+    """A user's JSON file (:func:`read_text` and strict JSON: no NaN / Infinity); InputErrors
+    name the file, the line and column of a syntax error, and ``fix``."""
+    from .errors import InputError
+
+    text = read_text(path, what, fix)
+    try:
+        return json.loads(text, parse_constant=_no_constants)
+    except RecursionError:
+        raise InputError(path, "", f"{what} is nested too deeply to be read",
+                         fix or "check the file") from None
     except json.JSONDecodeError as err:
-        raise InputError(path, f"line {err.lineno}", "malformed JSON", fix) from None
+        raise InputError(path, f"line {err.lineno}, column {err.colno}", f"malformed JSON ({err.msg})",
+                         fix or f"fix the {what}'s JSON syntax there") from None
+    except ValueError as err:
+        raise InputError(path, "", f"malformed JSON ({err})", fix or "use finite numbers") from None
+
+
+def read_json_doc(path: Path, fmt: str, what: str, fix: str) -> dict:
+    """A JSON document whose ``format`` key must be ``fmt``; problems are InputErrors naming
+    the file (``what`` names the document, ``fix`` the command that writes it)."""
+    from .errors import InputError, short
+
+    path = Path(path)
+    doc = read_json(path, what, fix)
     if not isinstance(doc, dict) or doc.get("format") != fmt:
         found = doc.get("format") if isinstance(doc, dict) else None
-        raise InputError(path, "format", f"unsupported format {found!r} (expects {fmt})", fix)
+        raise InputError(path, "format", f"unsupported format {short(found)} (expects {fmt})", fix)
     return doc
+
+
+def check_out_dir(path: Path, option: str = "--out") -> None:
+    """An InputError unless ``path`` is (or can be made) a writable folder: not a file, and
+    the folder or its nearest existing parent writable. Nothing is created here."""
+    from .errors import InputError
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InputError(option, str(path), "is a file, not a folder", "give a folder (new or existing)")
+    probe = path
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        raise InputError(option, str(path), f"{probe} is a file, so the folder cannot be made",
+                         "give a folder path")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        where = "the folder" if probe == path else f"its parent {probe}"
+        raise InputError(option, str(path), f"{where} is not writable", "give a folder you can write to")
 
 
 def write_atomic(path: Path, data: str | bytes) -> None:

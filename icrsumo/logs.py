@@ -20,8 +20,8 @@ import math
 from pathlib import Path
 from typing import Any
 
-from icrsumo.errors import InputError
-from icrsumo.fsio import dumps_json, write_atomic
+from icrsumo.errors import InputError, short
+from icrsumo.fsio import dumps_json, read_text, write_atomic
 from icrsumo.types import TERMINATIONS, EpisodeLog, EpisodeResult, Event, Infraction, TerminationClass
 from icrsumo.vocab import EventKind, Family, Termination
 
@@ -91,6 +91,11 @@ def log_to_dict(log: EpisodeLog) -> dict[str, Any]:
     }
 
 
+def _key(name: str) -> str:
+    """A key of the file as a place in a message (cut short when long)."""
+    return name if len(name) <= 40 else short(name)
+
+
 class _Reader:
     def __init__(self, source: str) -> None:
         self.source = source
@@ -114,16 +119,20 @@ class _Reader:
         try:
             return enum(text)
         except ValueError:
-            raise self.fail(place, f"unknown {what} {text!r}", f"one of {', '.join(enum)}") from None
+            raise self.fail(place, f"unknown {what} {short(text)}", f"one of {', '.join(enum)}") from None
 
     def integer(self, v: Any, place: str) -> int:
         if isinstance(v, bool) or not isinstance(v, int):
-            raise self.fail(place, f"expected an integer, got {v!r}")
+            raise self.fail(place, f"expected an integer, got {short(v)}")
         return v
 
     def number(self, v: Any, place: str) -> float:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise self.fail(place, f"expected a finite number, got {v!r}")
+        try:
+            ok = not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
+        except OverflowError:  # an integer beyond the float range
+            ok = False
+        if not ok:
+            raise self.fail(place, f"expected a finite number, got {short(v)}")
         return float(v)
 
 
@@ -135,10 +144,12 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
         raise rd.fail("", f"an episode log must be a JSON object, got {type(d).__name__}")
     unknown = sorted(set(d) - set(_HEADER))
     if unknown:
-        raise rd.fail(unknown[0], f"unknown key {unknown[0]!r}", f"allowed keys: {', '.join(_HEADER)}")
+        raise rd.fail(_key(unknown[0]), f"unknown key {short(unknown[0])}",
+                      f"allowed keys: {', '.join(_HEADER)}")
     version = rd.integer(rd.get(d, "version"), "version")
     if version != LOG_VERSION:
-        raise rd.fail("version", f"unsupported episode log version {version}", f"expected {LOG_VERSION}")
+        raise rd.fail("version", f"unsupported episode log version {short(version)}",
+                      f"expected {LOG_VERSION}")
     termination = rd.choice(rd.get(d, "termination"), Termination, "termination", "termination")
     step_length = rd.number(rd.get(d, "step_length"), "step_length")
     if step_length <= 0:
@@ -152,7 +163,7 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
         raise rd.fail("steps", "expected an object of per-step columns")
     extra = sorted(set(steps) - set(STEP_COLUMNS))
     if extra:
-        raise rd.fail(f"steps.{extra[0]}", f"unknown column {extra[0]!r}",
+        raise rd.fail(f"steps.{_key(extra[0])}", f"unknown column {short(extra[0])}",
                       f"allowed columns: {', '.join(STEP_COLUMNS)}")
     cols: dict[str, tuple] = {}
     for col, dec in STEP_COLUMNS.items():
@@ -175,7 +186,7 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
                           "progress is the furthest route position reached, so it never decreases")
     for i, v in enumerate(cols["outside"]):
         if v not in (0, 1):
-            raise rd.fail(f"steps.outside[{i}]", f"expected 0 or 1, got {v}")
+            raise rd.fail(f"steps.outside[{i}]", f"expected 0 or 1, got {short(v)}")
 
     raw_events = rd.get(d, "events")
     if not isinstance(raw_events, list):
@@ -183,7 +194,7 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
     events = []
     for i, ev in enumerate(raw_events):
         if not isinstance(ev, list) or len(ev) != len(EVENT_FIELDS):
-            raise rd.fail(f"events[{i}]", f"expected a list [{', '.join(EVENT_FIELDS)}], got {ev!r}")
+            raise rd.fail(f"events[{i}]", f"expected a list [{', '.join(EVENT_FIELDS)}], got {short(ev)}")
         kind = rd.choice(ev[0], EventKind, f"events[{i}].kind", "event kind")
         events.append(Event(
             kind=kind,
@@ -230,6 +241,9 @@ def loads_log(text: str, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
     except json.JSONDecodeError as err:
         place = f"line {err.lineno} column {err.colno}"
         raise InputError(source, place, f"not valid JSON: {err.msg}") from None
+    except RecursionError:
+        raise InputError(source, "", "not valid JSON: nested too deeply",
+                         "write episode logs with icrsumo.logs") from None
     return log_from_dict(d, source)
 
 
@@ -241,10 +255,10 @@ def write_log(path: Path | str, log: EpisodeLog) -> None:
 def read_log(path: Path | str) -> EpisodeLog:
     """Read a log written by :func:`write_log`."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as err:
-        raise InputError(str(path), "", f"cannot read episode log: {err.strerror or err}") from None
+    if not path.is_file():
+        why = "it is a folder" if path.is_dir() else "no such file"
+        raise InputError(str(path), "", f"cannot read episode log: {why}", "check the path")
+    text = read_text(path, "episode log", "write episode logs with icrsumo.logs")
     return loads_log(text, str(path))
 
 
@@ -276,14 +290,14 @@ def result_from_dict(d: Any, source: str = "<episode result>") -> EpisodeResult:
     termination = rd.choice(rd.get(d, "termination"), Termination, "termination", "termination")
     cls = rd.string(rd.get(d, "termination_class"), "termination_class")
     if cls != TERMINATIONS[termination].value:
-        raise rd.fail("termination_class", f"{cls!r} does not match termination {termination!r}")
+        raise rd.fail("termination_class", f"{short(cls)} does not match termination {termination!r}")
     raw = rd.get(d, "infractions")
     if not isinstance(raw, list):
         raise rd.fail("infractions", "expected a list")
     infractions = []
     for i, it in enumerate(raw):
         if not isinstance(it, list) or len(it) != 5:
-            raise rd.fail(f"infractions[{i}]", f"expected [kind, factor, t, pos, other], got {it!r}")
+            raise rd.fail(f"infractions[{i}]", f"expected [kind, factor, t, pos, other], got {short(it)}")
         infractions.append(Infraction(
             kind=rd.choice(it[0], EventKind, f"infractions[{i}].kind", "event kind"),
             factor=rd.number(it[1], f"infractions[{i}].factor"),

@@ -11,6 +11,7 @@ import heapq
 import math
 import os
 import subprocess
+import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -20,6 +21,7 @@ import numpy as np
 from .errors import InputError
 from .fsio import sha256_file, strip_header_comments, write_atomic
 from .resources import sumo_binary, sumo_home
+from .routes import check_xml_file
 
 #: vehicle class of the ego and of background cars
 EGO_VCLASS = "passenger"
@@ -56,14 +58,6 @@ class Connection:
     via_chain: tuple[str, ...] = ()
 
 
-def _check_not_entity_xml(path: Path) -> None:
-    """Reject network files that declare a DTD or entities (sumolib's SAX parser would read them)."""
-    with open(path, "rb") as fh:
-        head = fh.read(8192)
-    if b"<!DOCTYPE" in head or b"<!ENTITY" in head:
-        raise InputError(path, "header", "declares a DOCTYPE/ENTITY", "remove the DTD declarations")
-
-
 def polyline_cumlen(shape: np.ndarray) -> np.ndarray:
     """Arc length (m) at each vertex of the polyline ``shape`` ((N, 2) m): (N,), from 0."""
     seg = np.hypot(*np.diff(shape, axis=0).T) if len(shape) > 1 else np.zeros(0)
@@ -77,20 +71,28 @@ class RoadNet:
         import sumolib  # sumolib's net reader; pure Python
 
         self.path = Path(path)
-        if not self.path.is_file():
-            raise InputError(self.path, "", "network file not found", "check the path or --net")
-        _check_not_entity_xml(self.path)
+        check_xml_file(self.path, "network file", "check the path or --net")
         try:
             net = sumolib.net.readNet(str(self.path), withInternal=True)
-        except Exception as err:  # sumolib raises assorted errors on bad input
+            self._init(net)
+        except InputError:
+            raise
+        except Exception as err:  # sumolib and a half-formed net raise assorted errors
+            text = " ".join(str(err).split())
             raise InputError(
-                self.path, "", f"not a readable SUMO network ({type(err).__name__}: {err})",
+                self.path, "", f"not a readable SUMO network ({type(err).__name__}: {text[:120]})",
                 "give a .net.xml written by netconvert",
             ) from None
+
+    def _init(self, net) -> None:
         self.sha256 = sha256_file(self.path)
         off = net.getLocationOffset()
         #: SUMO netOffset (x, y) in m: x_sumo = x_carla + off_x, y_sumo = -y_carla + off_y
         self.offset = (float(off[0]), float(off[1]))
+        if not all(math.isfinite(v) and abs(v) <= 1e9 for v in self.offset):
+            raise InputError(self.path, "<location netOffset>",
+                             f"offset {off} is not finite (or beyond 1e9 m)",
+                             "give a .net.xml written by netconvert")
         self._net = net
         self.edge_length: dict[str, float] = {}
         self.edge_speed: dict[str, float] = {}
@@ -187,15 +189,24 @@ class RoadNet:
             b.append(shape[1:])
             lane_idx.append(np.full(len(shape) - 1, i))
             start.append(cum[:-1])
+        if not a:
+            raise InputError(self.path, "", "has no lanes that passenger cars may use",
+                             "give a road network with car lanes")
         self._seg_a = np.concatenate(a)
         self._seg_b = np.concatenate(b)
+        bad = ~(np.isfinite(self._seg_a).all(axis=1) & np.isfinite(self._seg_b).all(axis=1)
+                & (np.abs(self._seg_a) <= 1e8).all(axis=1) & (np.abs(self._seg_b) <= 1e8).all(axis=1))
+        if bad.any():
+            lane = self._lane_ids[int(np.concatenate(lane_idx)[int(np.argmax(bad))])]
+            raise InputError(self.path, f"lane {lane}", "shape holds a non-finite or huge coordinate",
+                             "give a .net.xml written by netconvert")
         self._seg_lane = np.concatenate(lane_idx)
         self._seg_start = np.concatenate(start)
 
     # ----------------------------------------------------------------- geometry
     def node_arms(self, node: str) -> int:
         """Number of distinct neighbouring nodes joined to ``node`` by car edges (roads met)."""
-        return len(self._arms.get(node, ()) - {node})
+        return len(self._arms.get(node, set()) - {node})
 
     @property
     def lane_km(self) -> float:
@@ -339,9 +350,8 @@ def _load_cached(path: str, mtime_ns: int, size: int) -> RoadNet:
 
 def load_net(path: Path) -> RoadNet:
     """Load (and cache per process) the network at ``path``."""
+    check_xml_file(Path(path), "network file", "check the path or --net")
     p = Path(path).resolve()
-    if not p.is_file():
-        raise InputError(path, "", "network file not found", "check the path or --net")
     st = p.stat()
     return _load_cached(str(p), st.st_mtime_ns, st.st_size)
 
@@ -352,29 +362,27 @@ def convert_xodr(xodr: Path, cache_dir: Path) -> Path:
     The cache key is the SHA-256 of the file's bytes and of the netconvert options.
     """
     xodr = Path(xodr)
-    if not xodr.is_file():
-        raise InputError(xodr, "", "OpenDRIVE file not found", "check the --xodr path")
+    check_xml_file(xodr, "OpenDRIVE file", "check the --xodr path")
     key = hashlib.sha256(
         bytes.fromhex(sha256_file(xodr)) + " ".join(XODR_OPTIONS).encode()
     ).hexdigest()[:16]
     out = Path(cache_dir) / f"{xodr.stem}-{key}.net.xml"
     if out.is_file():
         return out
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp.net.xml")
     env = dict(os.environ, PROJ_LIB=str(sumo_home() / "data" / "proj"))
-    proc = subprocess.run(
-        [sumo_binary("netconvert"), "--opendrive-files", str(xodr), *XODR_OPTIONS,
-         "--output-file", str(tmp), "--no-warnings", "true"],
-        capture_output=True, text=True, env=env,
-    )
-    if proc.returncode != 0 or not tmp.is_file():
-        tmp.unlink(missing_ok=True)
-        msg = (proc.stderr or proc.stdout).strip().splitlines()
-        raise InputError(
-            xodr, "", f"netconvert failed: {msg[-1] if msg else 'no output'}",
-            "check that the file is valid OpenDRIVE",
+    # netconvert writes into a private folder: nothing lands in cache_dir unless it succeeds
+    with tempfile.TemporaryDirectory(prefix="icrsumo-netconvert-") as scratch:
+        tmp = Path(scratch) / "out.net.xml"
+        proc = subprocess.run(
+            [sumo_binary("netconvert"), "--opendrive-files", str(xodr), *XODR_OPTIONS,
+             "--output-file", str(tmp), "--no-warnings", "true"],
+            capture_output=True, text=True, env=env,
         )
-    write_atomic(out, strip_header_comments(tmp.read_text(encoding="utf-8")))
-    tmp.unlink()
+        if proc.returncode != 0 or not tmp.is_file():
+            msg = (proc.stderr or proc.stdout).strip().splitlines()
+            last = " ".join(msg[-1].split())[:200] if msg else "no output"
+            raise InputError(xodr, "", f"netconvert failed: {last}",
+                             "check that the file is valid OpenDRIVE")
+        text = tmp.read_text(encoding="utf-8")
+    write_atomic(out, strip_header_comments(text))
     return out

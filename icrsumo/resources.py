@@ -42,13 +42,21 @@ def bundled_suites() -> dict[str, Path]:
 def suite_coords(suite: str) -> str | None:
     """The coordinate frame (``sumo`` or ``carla``) of a bundled suite's route file, from the
     ``suite.json`` beside it (``None``: not a bundled suite, or no frame recorded)."""
-    import json
+    from .errors import InputError
+    from .fsio import read_json
 
     path = bundled_suites().get(suite)
     meta = path.parent / "suite.json" if path is not None else None
     if meta is None or not meta.is_file():
         return "sumo" if path is not None else None
-    return str(json.loads(meta.read_text(encoding="utf-8")).get("coords", "sumo"))
+    doc = read_json(meta, "suite description", "reinstall icrsumo")
+    coords = doc.get("coords", "sumo") if isinstance(doc, dict) else None
+    if coords not in ("sumo", "carla"):
+        from .errors import short
+
+        raise InputError(meta, "coords", f"must be \"sumo\" or \"carla\", not {short(coords)}",
+                         "reinstall icrsumo")
+    return coords
 
 
 @cache

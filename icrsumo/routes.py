@@ -1,25 +1,139 @@
-"""Leaderboard-style route XML: reading (safely, with per-route errors) and writing."""
+"""Leaderboard-style route XML: reading (safely, with per-route errors) and writing, and the
+check that every XML file the package hands to a parser (route files, networks, OpenDRIVE,
+a scenario's SUMO config and route files) declares no DTD or entities."""
 
 from __future__ import annotations
 
 import math
+import re
+from functools import lru_cache
 from pathlib import Path
 from xml.etree.ElementTree import Element, ParseError
 
 from defusedxml import DefusedXmlException
 from defusedxml.ElementTree import parse as safe_parse
 
-from .errors import InputError
+from .errors import InputError, short
+from .fsio import BOMS
 from .types import RouteSpec, Waypoint
 
+#: bytes read per step by :func:`check_xml_file`
+_CHUNK = 1 << 20
+#: what may follow ``<!`` in a file the package reads: a comment or a CDATA section
+_ALLOWED_DECL = (b"--", b"[CDATA[")
+_ENCODING = re.compile(rb"""\A\s*<\?xml\b[^>]*?\bencoding\s*=\s*["']([^"']*)["']""")
+#: encodings in which the bytes of ``<!DOCTYPE`` are those of ASCII (what the scan looks for)
+_ASCII_ENCODINGS = frozenset({"utf-8", "utf8", "us-ascii", "ascii", "iso-8859-1", "iso8859-1",
+                              "latin-1", "latin1"})
+#: waypoint coordinates (m) and angles (degrees) beyond these are no place on a map
+MAX_COORD_M = 1e7
+MAX_ANGLE_DEG = 1e4
 
-def parse_xml_file(path: Path, expected_root: str | None = None) -> Element:
-    """Parse an untrusted XML file without DTDs or entity expansion; errors are InputErrors."""
+
+def _line_of(path: Path, offset: int) -> int:
+    """1-based line number of byte ``offset`` of the file (read again, on the error path only)."""
+    n, done = 1, 0
+    with open(path, "rb") as fh:
+        while done < offset:
+            block = fh.read(min(_CHUNK, offset - done))
+            if not block:
+                break
+            n += block.count(b"\n")
+            done += len(block)
+    return n
+
+
+def check_xml_file(path: Path, what: str = "XML file", fix: str = "") -> None:
+    """InputError unless ``path`` is a readable file of ASCII-compatible XML (UTF-8, ASCII or
+    Latin-1; no UTF-16/32, no NUL byte) with no ``<!DOCTYPE``/``<!ENTITY``/other markup
+    declaration anywhere: after ``<!`` only a comment or a CDATA section may start. The whole
+    file is scanned in 1 MiB blocks (a declaration split across two blocks is seen), so a
+    declaration after a long comment is found before any parser (sumolib, SUMO, netconvert)
+    reads the file. ``what`` names the file in the message ("network file"), ``fix`` says where
+    it comes from. Scans about 1 GB/s; each file is scanned once per process while unchanged."""
     path = Path(path)
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        raise InputError(path, "", f"{what} not found", fix or "check the path") from None
+    except OSError as err:
+        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})", fix) from None
     if not path.is_file():
-        raise InputError(path, "", "file not found", "check the path")
+        raise InputError(path, "", f"is a folder, not a {what}" if path.is_dir() else f"{what} is not a file",
+                         fix or "pass the file")
+    _check_xml_cached(str(path.resolve()), st.st_mtime_ns, st.st_size, str(path), what, fix)
+
+
+@lru_cache(maxsize=256)
+def _check_xml_cached(real: str, mtime_ns: int, size: int, shown: str, what: str, fix: str) -> None:
+    path = Path(shown)
+    try:
+        with open(real, "rb") as fh:
+            _scan(fh, path, Path(real), what, fix)
+    except PermissionError:
+        raise InputError(path, "", f"{what} is not readable (permission denied)",
+                         "check the file's permissions") from None
+    except OSError as err:
+        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})", fix) from None
+
+
+def _scan(fh, path: Path, real: Path, what: str, fix: str) -> None:
+    """The scan of :func:`check_xml_file` over the open file ``fh`` (``real``: its path)."""
+    need = 2 + len(_ALLOWED_DECL[1])  # bytes from "<" on that decide what "<!" starts
+    block = fh.read(_CHUNK)
+    _check_head(path, block, what, fix)
+    carry, base = b"", 0  # base: file offset of data[0]
+    while True:
+        nul = block.find(b"\x00")
+        if nul >= 0:
+            raise InputError(path, f"line {_line_of(real, base + len(carry) + nul)}",
+                             f"{what} holds a NUL byte (not UTF-8 text)", "save it as UTF-8 XML")
+        data = carry + block
+        limit = len(data) - need + 1 if block else len(data)  # "<!" at i < limit is decided
+        i = data.find(b"<!")
+        while 0 <= i < limit:
+            tail = data[i + 2:i + need]
+            if not tail.startswith(_ALLOWED_DECL):
+                word = re.match(rb"[A-Za-z]*", tail).group(0).decode("ascii") or "..."
+                raise InputError(
+                    path, f"line {_line_of(real, base + i)}",
+                    f"{what} holds a forbidden XML construct: <!{word} (DTDs and entities are not read)",
+                    "remove the <!DOCTYPE ...> / <!ENTITY ...> declarations")
+            i = data.find(b"<!", i + 2)
+        if not block:
+            return
+        cut = max(limit, 0)
+        carry, base = data[cut:], base + cut
+        block = fh.read(_CHUNK)
+
+
+def _check_head(path: Path, head: bytes, what: str, fix: str) -> None:
+    """The start of the file: no UTF-16/32, markup first, an ASCII-compatible encoding."""
+    for bom, name in BOMS:
+        if head.startswith(bom):
+            raise InputError(path, "", f"{what} is {name}-encoded, not UTF-8", "save it as UTF-8")
+    body = head.removeprefix(b"\xef\xbb\xbf").lstrip(b" \t\r\n")
+    if not body:
+        raise InputError(path, "", f"{what} is empty", fix or "pass the full file")
+    if not body.startswith(b"<"):
+        raise InputError(path, "line 1", f"{what} is not XML (it starts with {body[:8]!r})",
+                         fix or "pass an XML file")
+    m = _ENCODING.match(body)
+    if m is not None and m.group(1).decode("latin-1").lower() not in _ASCII_ENCODINGS:
+        raise InputError(path, "line 1", f"{what} declares encoding {short(m.group(1).decode('latin-1'))}",
+                         "save it as UTF-8 (encoding=\"UTF-8\")")
+
+
+def parse_xml_file(path: Path, expected_root: str | None = None, what: str = "route file",
+                   fix: str = "") -> Element:
+    """Parse an untrusted XML file (:func:`check_xml_file`, then defusedxml: no DTDs, no entity
+    expansion); errors are InputErrors."""
+    path = Path(path)
+    check_xml_file(path, what, fix)
     try:
         root = safe_parse(str(path), forbid_dtd=True).getroot()
+    except OSError as err:
+        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})", fix) from None
     except ParseError as err:
         line, col = err.position
         raise InputError(
@@ -33,12 +147,14 @@ def parse_xml_file(path: Path, expected_root: str | None = None) -> Element:
     if expected_root is not None and root.tag != expected_root:
         raise InputError(
             path, f"root element <{root.tag}>", f"expected <{expected_root}>",
-            f"use a leaderboard route file whose root is <{expected_root}>",
+            fix or f"use a leaderboard route file whose root is <{expected_root}>",
         )
     return root
 
 
 def _float_attr(el: Element, name: str, path: Path, place: str, required: bool) -> float | None:
+    """Attribute ``name`` of a waypoint as a float: a finite number within
+    :data:`MAX_COORD_M` (x, y, z in m) or :data:`MAX_ANGLE_DEG` (pitch, roll, yaw in degrees)."""
     raw = el.get(name)
     if raw is None:
         if required:
@@ -48,10 +164,15 @@ def _float_attr(el: Element, name: str, path: Path, place: str, required: bool) 
         value = float(raw)
     except ValueError:
         raise InputError(
-            path, place, f"attribute {name}={raw!r} is not a number", "write a decimal number"
+            path, place, f"attribute {name}={short(raw)} is not a number", "write a decimal number"
         ) from None
     if not math.isfinite(value):
-        raise InputError(path, place, f"attribute {name}={raw!r} is not finite", "use a finite number")
+        raise InputError(path, place, f"attribute {name}={short(raw)} is not finite",
+                         "write a finite decimal number")
+    bound, unit = (MAX_ANGLE_DEG, "degrees") if name in ("pitch", "roll", "yaw") else (MAX_COORD_M, "m")
+    if abs(value) > bound:
+        raise InputError(path, place, f"attribute {name}={short(raw)} is out of range "
+                         f"(|{name}| > {bound:g} {unit})", "check the value and its units")
     return value
 
 
@@ -59,7 +180,9 @@ def _parse_route(el: Element, index: int, path: Path) -> RouteSpec:
     rid = el.get("id")
     if rid is None or not rid.strip():
         raise InputError(path, f"route #{index}", "missing attribute 'id'", 'add id="..."')
-    place = f"route {rid}"
+    place = f"route {rid}" if len(rid) <= 60 else f"route #{index} (id {short(rid)})"
+    if len(rid) > 200:
+        raise InputError(path, place, f"route id is {len(rid)} characters long", "use an id of at most 200")
     waypoints = []
     for k, wp in enumerate(el.findall("waypoint")):
         wplace = f"{place}, waypoint {k}"
@@ -77,10 +200,14 @@ def _parse_route(el: Element, index: int, path: Path) -> RouteSpec:
             path, place, f"has {len(waypoints)} waypoint(s), needs at least 2",
             "give a start and an end <waypoint>",
         )
+    town = (el.get("town") or "").strip()
+    if len(town) > 100 or town in (".", "..") or any(c in town for c in "/\\\0"):
+        raise InputError(path, place, f"town {short(town)} is not a town name",
+                         "name a town (such as Town01) without path separators")
     weather_el = el.find("weather")
     weather = tuple(weather_el.attrib.items()) if weather_el is not None else ()
     return RouteSpec(
-        id=rid.strip(), town=(el.get("town") or "").strip(), waypoints=tuple(waypoints),
+        id=rid.strip(), town=town, waypoints=tuple(waypoints),
         weather=weather, index=index,
     )
 

@@ -7,9 +7,11 @@ Only the evaluating process writes; workers return results to it.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sqlite3
 import zlib
+from collections.abc import Iterator
 from dataclasses import asdict, fields
 from pathlib import Path
 
@@ -35,12 +37,38 @@ class ResultStore:
 
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
+        existed = self.path.exists()
+        if existed and not self.path.is_file():
+            raise InputError(self.path, "", "is not a file", "move it away: the results store is a file")
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._db = sqlite3.connect(str(self.path))
-        self._db.execute("PRAGMA journal_mode=WAL")
-        self._db.execute("PRAGMA synchronous=FULL")
-        self._db.executescript(_SCHEMA)
-        self._db.commit()
+        with self._guard("opening"):
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=FULL")
+            if existed:
+                bad = [r[0] for r in self._db.execute("PRAGMA quick_check")]
+                if bad != ["ok"]:
+                    raise sqlite3.DatabaseError(bad[0])
+            self._db.executescript(_SCHEMA)
+            self._db.commit()
+
+    @staticmethod
+    def check(path: Path) -> None:
+        """An InputError if a store exists at ``path`` and cannot be read (nothing is created)."""
+        if Path(path).exists():
+            ResultStore(path).close()
+
+    @contextlib.contextmanager
+    def _guard(self, doing: str) -> Iterator[None]:
+        """SQLite's errors on a damaged file as one InputError naming the store."""
+        try:
+            yield
+        except sqlite3.DatabaseError as err:
+            with contextlib.suppress(sqlite3.Error):
+                self._db.close()
+            raise InputError(self.path, doing, f"the results store is damaged or not an icrsumo store "
+                             f"({err})", "restore it from a copy, or move it away and rerun (its episodes "
+                             "are then run again)") from None
 
     def close(self) -> None:
         self._db.close()
@@ -53,12 +81,14 @@ class ResultStore:
 
     # ----------------------------------------------------------------- meta
     def get_meta(self, key: str) -> str | None:
-        row = self._db.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
+        with self._guard("reading"):
+            row = self._db.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
         return None if row is None else row[0]
 
     def set_meta(self, key: str, value: str) -> None:
-        self._db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES (?, ?)", (key, value))
-        self._db.commit()
+        with self._guard("writing"):
+            self._db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES (?, ?)", (key, value))
+            self._db.commit()
 
     # ----------------------------------------------------------------- episodes
     def put(self, rec: EpisodeRecord, log_json: str | None = None) -> None:
@@ -67,31 +97,41 @@ class ResultStore:
         row["infractions"] = json.dumps([list(i) for i in rec.infractions])
         row["log"] = zlib.compress(log_json.encode("utf-8"), 6) if log_json else None
         cols = _COLUMNS + ["log"]
-        self._db.execute(
-            f"INSERT OR REPLACE INTO episodes ({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})",
-            [row[c] for c in cols],
-        )
-        self._db.commit()
+        with self._guard("writing"):
+            self._db.execute(
+                f"INSERT OR REPLACE INTO episodes ({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})",
+                [row[c] for c in cols],
+            )
+            self._db.commit()
 
-    def keys(self) -> set[tuple[str, str, str, int, int]]:
-        """Keys of every stored episode (done or crashed)."""
-        return {tuple(r) for r in self._db.execute("SELECT agent, route_id, family, k, seed FROM episodes")}
+    def keys(self, status: EpisodeStatus | None = None) -> set[tuple[str, str, str, int, int]]:
+        """Keys of every stored episode (done or crashed), or of those with ``status``."""
+        sql = "SELECT agent, route_id, family, k, seed FROM episodes"
+        with self._guard("reading"):
+            if status is None:
+                return {tuple(r) for r in self._db.execute(sql)}
+            return {tuple(r) for r in self._db.execute(sql + " WHERE status = ?", (str(status),))}
 
     def records(self) -> list[EpisodeRecord]:
         """Every stored episode, sorted by key."""
-        rows = self._db.execute(
-            f"SELECT {', '.join(_COLUMNS)} FROM episodes ORDER BY agent, route_id, family, k, seed")
+        with self._guard("reading"):
+            rows = self._db.execute(
+                f"SELECT {', '.join(_COLUMNS)} FROM episodes ORDER BY agent, route_id, family, k, seed"
+            ).fetchall()
         out = []
         for r in rows:
             d = dict(zip(_COLUMNS, r))
             try:
+                for c in ("ds", "rc", "is_", "length", "duration", "k", "seed", "attempts"):
+                    if d[c] is not None and (not isinstance(d[c], (int, float)) or d[c] != d[c]):
+                        raise TypeError(f"{c} is {d[c]!r}, not a number")
                 raw = json.loads(d["infractions"] or "[]")
                 d["infractions"] = tuple((EventKind(k), float(f)) for k, f in raw)
                 d["status"], d["family"] = EpisodeStatus(d["status"]), Family(d["family"])
                 term, cls = d["termination"], d["termination_class"]
                 d["termination"] = Termination(term) if term else ""
                 d["termination_class"] = TerminationClass(cls) if cls else ""
-            except ValueError as err:
+            except (ValueError, TypeError) as err:
                 key = "/".join(str(d[k]) for k in ("agent", "route_id", "family", "k", "seed"))
                 raise InputError(self.path, f"episode {key}", f"holds an unknown value ({err})",
                                  "the store is damaged: move it away and rerun the evaluation") from None
@@ -100,7 +140,15 @@ class ResultStore:
 
     def log(self, agent: str, route_id: str, family: str, k: int, seed: int) -> str | None:
         """The stored episode log (JSON text) of one episode, if any."""
-        row = self._db.execute(
-            "SELECT log FROM episodes WHERE agent=? AND route_id=? AND family=? AND k=? AND seed=?",
-            (agent, route_id, family, k, seed)).fetchone()
-        return None if row is None or row[0] is None else zlib.decompress(row[0]).decode("utf-8")
+        with self._guard("reading"):
+            row = self._db.execute(
+                "SELECT log FROM episodes WHERE agent=? AND route_id=? AND family=? AND k=? AND seed=?",
+                (agent, route_id, family, k, seed)).fetchone()
+        if row is None or row[0] is None:
+            return None
+        try:
+            return zlib.decompress(row[0]).decode("utf-8")
+        except (zlib.error, TypeError, UnicodeDecodeError) as err:
+            raise InputError(self.path, f"episode {agent}/{route_id}/{family}/{k}/{seed}",
+                             f"its stored log is damaged ({err})",
+                             "delete that row (or move the store away) and rerun") from None

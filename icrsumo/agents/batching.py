@@ -83,7 +83,7 @@ class BatchingCore:
                 if agent is not None and callable(getattr(agent, "close", None)):
                     agent.close()
             t.result = None
-        except Exception as err:  # the user's agent failed: the client gets the reason
+        except (Exception, SystemExit, KeyboardInterrupt) as err:  # the user's agent failed (or exited)
             t.status, t.error = 500, f"{t.kind}() raised {describe(err)}"
         t.done.set()
 
@@ -111,14 +111,14 @@ class BatchingCore:
                                      f"{len(actions) if hasattr(actions, '__len__') else '?'} actions "
                                      f"for {len(live)} observations")
                 results = [(a, None) for a in actions]
-            except Exception as err:
+            except (Exception, SystemExit, KeyboardInterrupt) as err:
                 results = [(None, err)] * len(live)
         else:
             results = []
             for t, agent in live:
                 try:
                     results.append((agent.act(t.payload), None))
-                except Exception as err:
+                except (Exception, SystemExit, KeyboardInterrupt) as err:
                     results.append((None, err))
         for (t, _), (action, err) in zip(live, results):
             if err is None:

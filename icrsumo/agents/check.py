@@ -103,7 +103,7 @@ def _drive(factory: Callable, caller: ThreadWatch, scenario, iset, timeout: floa
     except AgentTimeout:
         run.problem, run.hung = f"creating the agent did not finish within {timeout:g} s", True
         return run
-    except Exception as err:
+    except (Exception, SystemExit) as err:
         run.problem = _raised("creating the agent", err)
         return run
     privileged = bool(getattr(agent, "privileged", False))
@@ -115,7 +115,7 @@ def _drive(factory: Callable, caller: ThreadWatch, scenario, iset, timeout: floa
         except AgentTimeout:
             run.problem, run.hung = f"reset() did not answer within {timeout:g} s", True
             return run
-        except Exception as err:
+        except (Exception, SystemExit) as err:
             run.problem = _raised("reset(info)", err)
             return run
         obs = ep.start()
@@ -127,7 +127,7 @@ def _drive(factory: Callable, caller: ThreadWatch, scenario, iset, timeout: floa
             except AgentTimeout:
                 run.problem, run.hung = f"{at} did not answer within {timeout:g} s", True
                 break
-            except Exception as err:
+            except (Exception, SystemExit) as err:
                 run.problem = _raised(at, err)
                 break
             run.act_s.append(dt)
@@ -144,7 +144,7 @@ def _drive(factory: Callable, caller: ThreadWatch, scenario, iset, timeout: floa
     if callable(getattr(agent, "close", None)):
         try:
             _timed(caller, agent.close)
-        except Exception as err:  # noqa: BLE001 - reported, never fatal
+        except (Exception, SystemExit) as err:  # noqa: BLE001 - reported, never fatal
             if not run.problem:
                 run.problem = "close() did not answer" if isinstance(err, AgentTimeout) else \
                     _raised("close()", err)
@@ -192,7 +192,7 @@ def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUIT
     except AgentTimeout:
         found.append(Finding(False, f"creating the agent did not finish within {timeout:g} s"))
         return report()
-    except Exception as err:
+    except (Exception, SystemExit) as err:
         found.append(Finding(False, _raised(f"creating the agent ({spec.rpartition(':')[2]}())", err)))
         return report()
     name, privileged = getattr(probe, "name", None), getattr(probe, "privileged", None)
@@ -271,6 +271,6 @@ def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUIT
                                            f"decisions of 2 sessions"))
         except AgentTimeout:
             found.append(Finding(False, f"act_batch() did not answer within {timeout:g} s"))
-        except Exception as err:
+        except (Exception, SystemExit) as err:
             found.append(Finding(False, _raised("act_batch()", err)))
     return report()

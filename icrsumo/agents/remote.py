@@ -190,8 +190,8 @@ def parse_url(url: str) -> tuple[str, int, float]:
         timeout = float(parse_qs(parts.query).get("timeout", [DEFAULT_TIMEOUT])[0])
     except ValueError:
         raise InputError("--agent", f"remote:{url}", "bad port or timeout", fix) from None
-    if not timeout > 0:
-        raise InputError("--agent", f"remote:{url}", "timeout must be positive", fix)
+    if not 0 < timeout < float("inf"):
+        raise InputError("--agent", f"remote:{url}", "timeout must be a positive number of seconds", fix)
     return parts.hostname, port, timeout
 
 

@@ -24,6 +24,7 @@ import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 
+from ..devices import check_device
 from ..errors import InputError
 from .batching import BatchingCore, Task
 from .registry import agent_factory, agent_name
@@ -55,8 +56,9 @@ class AgentServer(BatchingCore):
 
         try:
             self.httpd = ThreadingHTTPServer((host, port), Handler)
-        except OSError as err:
-            raise InputError("--port", f"{host}:{port}", f"cannot listen ({err.strerror or err})",
+        except (OSError, OverflowError, TypeError) as err:
+            why = getattr(err, "strerror", "") or err
+            raise InputError("--port", f"{host}:{port}", f"cannot listen ({why})",
                              "pick a free port or another --host") from None
         self.httpd.daemon_threads = True
         self.host, self.port = self.httpd.server_address[:2]
@@ -171,6 +173,12 @@ class _Handler(BaseHTTPRequestHandler):
 def serve(spec: str, host: str = "127.0.0.1", port: int = 8765, max_batch: int = 8,
           device: str | None = None) -> None:
     """Serve ``spec`` (on ``device``) until interrupted (the ``icrsumo serve-agent`` command)."""
+    if not isinstance(port, int) or not 0 <= port <= 65535:
+        raise InputError("--port", str(port), "out of range", "use 0 to 65535 (0: any free port)")
+    if max_batch < 1:
+        raise InputError("--max-batch", str(max_batch), "must be at least 1", "give a positive count")
+    if device is not None:
+        check_device(device)
     server = AgentServer(spec, host, port, max_batch, device=device)
     print(f"icrsumo: serving agent {server.name!r} ({spec}) on {server.url} (protocol {PROTOCOL}, "
           f"{'act_batch' if server.batch_hook else 'act per session'}, max batch {max_batch}); "

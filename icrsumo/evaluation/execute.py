@@ -14,7 +14,7 @@ from typing import Any
 from ..agents.base import Agent, AgentTimeout
 from ..agents.registry import agent_factory
 from ..agents.watch import CallWatch, Unwatched
-from ..errors import describe
+from ..errors import Interrupted, describe
 from ..scenario import Scenario
 from ..types import EpisodeRecord, InstructionSet
 from ..vocab import EpisodeStatus, ErrorKind, OutcomeStatus
@@ -73,7 +73,7 @@ class WatchedAgent:
     def close(self) -> None:
         """The agent's optional ``close()`` (best effort: its errors are ignored)."""
         if callable(getattr(self._agent, "close", None)):
-            with contextlib.suppress(Exception):
+            with contextlib.suppress(Exception, SystemExit):
                 self._agent.close()
 
 
@@ -135,7 +135,11 @@ class EpisodeWorker:
                 length=round(sc.length, 2), duration=r.duration, message=log.message,
             )
             return Outcome.finished(rec, dumps_log(log))
-        except Exception as err:  # an agent or the simulator failed: the caller retries / records
+        except Interrupted:  # the user's Ctrl-C (in-process runs): stop the evaluation
+            raise
+        except (Exception, SystemExit, KeyboardInterrupt) as err:
+            # an agent or the simulator failed (agent code calling sys.exit or raising
+            # KeyboardInterrupt included): the caller retries / records
             return Outcome.of_error(err)
 
     def close(self) -> None:

@@ -8,10 +8,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..agents.registry import DEFAULT_AGENT
-from ..errors import InputError
+from ..devices import check_device
+from ..errors import InputError, check_seed
+from ..fsio import check_out_dir
 from ..instructions.baseline_bank import load_baseline_bank
 from ..instructions.families import FAMILIES
 from ..resources import bundled_suites
+from ..traffic import TRAFFIC_LEVELS
 
 #: execution backends: a local process pool, or Ray
 BACKENDS = ("local", "ray")
@@ -50,6 +53,8 @@ class EvalOptions:
     #: LangAuto's own baseline wording (LMDrive's instruction dictionary, a JSON file) for the
     #: instruction types it maps; part of the out folder's configuration through its SHA-256
     baseline_bank: Path | str | None = None
+    #: run the stored crashed episodes again (a transient fault repaired in place)
+    retry_crashed: bool = False
 
     def check(self) -> None:
         """InputErrors for bad values (agent specs are checked when they are resolved)."""
@@ -61,22 +66,32 @@ class EvalOptions:
             raise InputError("--backend", self.backend, "unknown backend", "use local or ray")
         if not 1 <= self.k <= 64:
             raise InputError("--k", str(self.k), "out of range", "use 1 to 64 (default 8)")
+        check_seed(self.seed)
+        if self.max_batch < 1:
+            raise InputError("--max-batch", str(self.max_batch), "must be at least 1",
+                             "give a positive count")
         if self.workers < 1:
             raise InputError("--workers", str(self.workers), "must be at least 1", "give a positive count")
-        if self.agent_timeout is not None and not self.agent_timeout > 0:
+        if self.agent_timeout is not None and not 0 < self.agent_timeout < float("inf"):
             raise InputError("--agent-timeout", str(self.agent_timeout), "must be positive",
                              "give seconds per agent call (0 on the command line: no limit)")
+        check_out_dir(Path(self.out))
+        if self.address is not None and self.backend != "ray":
+            raise InputError("--address", self.address, "is for the ray backend", "add --backend ray")
         if self.batch_inference is not None:
+            check_device(self.batch_inference, "--batch-inference")
             if self.backend != "local":
                 raise InputError("--batch-inference", self.batch_inference, "works with the local backend "
                                  "only (its workers reach the inference process through a Unix socket)",
                                  "use --backend local")
-            if self.max_batch < 1:
-                raise InputError("--max-batch", str(self.max_batch), "must be at least 1",
-                                 "give a positive count")
             if self.inference_processes < 1:
                 raise InputError("--inference-processes", str(self.inference_processes),
                                  "must be at least 1", "give a positive count")
+        if self.agent_device is not None:
+            check_device(self.agent_device, "agent_device")
+        if self.traffic not in TRAFFIC_LEVELS:
+            raise InputError("--traffic", str(self.traffic), "unknown traffic level",
+                             f"use {', '.join(TRAFFIC_LEVELS)}")
         if self.baseline_bank is not None:
             load_baseline_bank(self.baseline_bank)  # an InputError for a bad file, before anything runs
         p = Path(self.suite)

@@ -3,9 +3,11 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from ..convert import safe_name
+from ..errors import InputError
 from ..instructions.families import FAMILIES
 from ..scenario import find_scenarios, read_scenario
 from ..store import ResultStore
@@ -14,16 +16,25 @@ from .options import EvalOptions
 
 
 def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: list[EpisodeRecord],
-                  scenarios: Path, instr_dir: Path) -> dict:
+                  scenarios: Path, instr_dir: Path, not_shown: int = 0) -> dict:
     """Write summary.json, tables and figures of ``records`` into ``out`` (the table is printed
-    unless ``opts.quiet``); returns the summary."""
+    unless ``opts.quiet``); returns the summary. ``not_shown``: episodes in the store that are
+    not of this evaluation (other agents, routes, families or k), counted in the summary
+    (``episodes.stored_not_in_report``) and named on stderr, never dropped silently."""
     from ..aggregate import summarize
     from ..report import write_report
 
     families = tuple(f for f in FAMILIES if f in opts.families)  # canonical order
     summary = summarize(records, suite=opts.suite, seed=opts.seed, k=opts.k, families=families)
+    if not_shown:
+        summary["episodes"]["stored_not_in_report"] = not_shown
+        print(f"icrsumo: note: {not_shown} stored episodes of other agents, routes, families or k are "
+              f"not in this report (icrsumo report {out} shows all)", file=sys.stderr)
     table = write_report(summary, records, out)
-    rollout_figure(opts, out, store, records, scenarios, instr_dir)
+    try:
+        rollout_figure(opts, out, store, records, scenarios, instr_dir)
+    except InputError as err:  # the figure is optional; the numbers are all in the tables
+        print(f"icrsumo: note: no rollout figure: {err.line()}", file=sys.stderr)
     if not opts.quiet:
         print(table)
     return summary

@@ -3,16 +3,16 @@ and the episode jobs of the paired protocol in their fixed order."""
 
 from __future__ import annotations
 
-import json
+import shutil
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..agents.base import Agent
 from ..convert import ConvertOptions, convert_routes, safe_name
 from ..errors import InputError
-from ..fsio import dumps_json, write_atomic
+from ..fsio import dumps_json, read_json, write_atomic
 from ..instructions.baseline_bank import BaselineBank, load_baseline_bank
 from ..instructions.families import FAMILIES
 from ..instructions.generate import GenerateOptions, generate
@@ -66,7 +66,9 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None)
     compared = {**config, "baseline_bank_sha256": bank.sha256 if bank is not None else None}
     path = out / "config.json"
     if path.is_file():
-        old = json.loads(path.read_text(encoding="utf-8"))
+        old = read_json(path, "evaluation configuration", "restore it, or use another --out folder")
+        if not isinstance(old, dict):
+            raise InputError(path, "", "is not a JSON object", "restore it, or use another --out folder")
         diff = [k for k in compared if old.get(k) != compared[k]]
         if diff:
             shown = ", ".join(f"{k}={old.get(k)!r} (now {compared[k]!r})" for k in diff)
@@ -91,35 +93,75 @@ def _resolve_suite(opts: EvalOptions, out: Path) -> tuple[Path, list[str]]:
 
 
 def prepare_suite(opts: EvalOptions) -> PreparedSuite:
-    """Check and write OUT/config.json, convert the suite into OUT/scenarios (a convert-routes
-    folder is used as it is) and generate the instructions of every family into
-    OUT/instructions (both reused when present). Skipped routes are named on stderr."""
+    """Check the out folder's configuration, convert the suite into OUT/scenarios (a
+    convert-routes folder is used as it is), generate the instructions of every family into
+    OUT/instructions (both reused when present), check ``--routes`` and ``--rollout-route``
+    against the suite, and only then write OUT/config.json. Skipped routes are named on stderr.
+    When anything is refused, an out folder this call created is removed again: a refused run
+    leaves nothing behind (and never a config.json that locks the folder)."""
     out = Path(opts.out)
     bank = load_baseline_bank(opts.baseline_bank) if opts.baseline_bank is not None else None
     config = check_config(out, opts, bank)
-    out.mkdir(parents=True, exist_ok=True)
-    write_atomic(out / "config.json", dumps_json(config))
-    scenarios, skipped = _resolve_suite(opts, out)
-    for line in skipped:
-        print(f"icrsumo: skipped: {line}", file=sys.stderr)
-    instr_dir = out / "instructions"
-    if bank is not None and bank.note():
-        print(bank.note(), file=sys.stderr)
-    written, failures = generate(scenarios, instr_dir, GenerateOptions(
-        families=FAMILIES, k=opts.k, seed=opts.seed, workers=1, baseline_bank=bank))
-    for line in failures:
-        print(f"icrsumo: skipped: {line}", file=sys.stderr)
+    fresh = not out.exists()
+    empty = not fresh and out.is_dir() and not any(out.iterdir())
+    try:
+        scenarios, skipped = _resolve_suite(opts, out)
+        for line in skipped:
+            print(f"icrsumo: skipped: {line}", file=sys.stderr)
+        instr_dir = out / "instructions"
+        if bank is not None and bank.note():
+            print(bank.note(), file=sys.stderr)
+        written, failures = generate(scenarios, instr_dir, GenerateOptions(
+            families=FAMILIES, k=opts.k, seed=opts.seed, workers=1, baseline_bank=bank))
+        for line in failures:
+            print(f"icrsumo: skipped: {line}", file=sys.stderr)
+        if not written and not (out / "results.sqlite").exists():  # (with a store: run checks it)
+            raise no_routes(opts)
+        check_route_ids(opts, written)
+        out.mkdir(parents=True, exist_ok=True)
+        write_atomic(out / "config.json", dumps_json(config))
+    except BaseException:
+        if fresh:
+            shutil.rmtree(out, ignore_errors=True)
+        elif empty:  # the user's empty folder: keep it, empty
+            for child in out.iterdir():
+                shutil.rmtree(child, ignore_errors=True) if child.is_dir() else child.unlink(missing_ok=True)
+        raise
     return PreparedSuite(scenarios, instr_dir, tuple(written), tuple(skipped) + tuple(failures))
+
+
+def no_routes(opts: EvalOptions) -> InputError:
+    """The error of a suite none of whose routes could be prepared."""
+    return InputError(opts.suite, "", "no route of the suite could be prepared (see the lines above)",
+                      "fix the routes named above")
+
+
+def check_route_ids(opts: EvalOptions, routes: Iterable[str]) -> None:
+    """InputErrors for ``--routes`` or ``--rollout-route`` ids that are not among ``routes``
+    (the prepared suite's)."""
+    have = list(routes)
+    shown = ", ".join(have[:8]) + (", ..." if len(have) > 8 else "")
+    missing = sorted(set(opts.routes or ()) - set(have))
+    if missing:
+        raise InputError("--routes", missing[0], "no such route in the suite",
+                         f"use route ids of the suite: {shown}")
+    chosen = set(opts.routes or have)
+    if opts.rollout_route is not None and opts.rollout_route not in chosen:
+        raise InputError("--rollout-route", opts.rollout_route, "not a route of this evaluation",
+                         f"use one of {shown}" if not opts.routes else "use one of the --routes")
 
 
 def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mapping[str, str]) -> list[Job]:
     """Every episode of the protocol, in a fixed order (agent, route, family, k); ``names``:
     agent spec -> the name its results are stored under."""
-    scs = [(d, read_scenario(d)) for d in find_scenarios(scenarios)]
+    scs = []
+    for d in find_scenarios(scenarios):
+        try:
+            scs.append((d, read_scenario(d)))
+        except InputError:  # named as skipped when the suite was prepared
+            continue
     if opts.routes:
-        missing = sorted(set(opts.routes) - {sc.route_id for _, sc in scs})
-        if missing:
-            raise InputError("--routes", missing[0], "no such route in the suite", "check the route ids")
+        check_route_ids(opts, [sc.route_id for _, sc in scs])
         scs = [(d, sc) for d, sc in scs if sc.route_id in set(opts.routes)]
     sets = [("baseline", 0)] + [(f, k) for f in opts.families for k in range(opts.k)]
     jobs = []

@@ -4,13 +4,14 @@ imported here, once), prepare the suite, plan the jobs, run those not stored yet
 
 from __future__ import annotations
 
-import json
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ..agents.registry import DEFAULT_AGENT, agent_factory, agent_name
-from ..errors import InputError
+from ..errors import InputError, expect
+from ..fsio import read_json
 from ..instructions.families import FAMILIES
 from ..store import ResultStore
 from ..types import EpisodeRecord
@@ -19,7 +20,7 @@ from .backends import run_jobs
 from .inference import route_jobs, start_inference, stop_inference
 from .options import EvalOptions
 from .outputs import write_outputs
-from .plan import Job, plan_jobs, prepare_suite
+from .plan import Job, no_routes, plan_jobs, prepare_suite
 from .progress import Progress
 
 #: attempts an episode gets at most
@@ -54,16 +55,21 @@ def resolve_agents(specs: tuple[str, ...]) -> dict[str, Callable]:
 
 
 def run_evaluation(opts: EvalOptions) -> EvalResult:
-    """Run (or resume) an evaluation and write its reports."""
+    """Run (or resume) an evaluation and write its reports. Everything is checked before anything
+    is written (options, agents, the out folder's configuration and store, the suite)."""
     opts.check()
     factories = resolve_agents(opts.agents)
     names = {spec: agent_name(spec, f) for spec, f in factories.items()}
-    prep = prepare_suite(opts)
     out = Path(opts.out)
+    ResultStore.check(out / "results.sqlite")
+    prep = prepare_suite(opts)
     written = set(prep.routes)
     jobs = [j for j in plan_jobs(opts, prep.scenarios, prep.instructions, names) if j.route_id in written]
     with ResultStore(out / "results.sqlite") as store:
-        have = store.keys()
+        check_stored_routes(opts, store, set(names.values()), written, prep.skipped)
+        if not written:
+            raise no_routes(opts)
+        have = store.keys(EpisodeStatus.DONE if opts.retry_crashed else None)
         todo = [j for j in jobs if j.key not in have]
         with Progress(len(todo), opts.quiet) as progress:
             servers = start_inference(opts, todo, factories)
@@ -73,11 +79,32 @@ def run_evaluation(opts: EvalOptions) -> EvalResult:
                 progress.close()
                 stats = stop_inference(opts, servers)
         keys = {j.key for j in jobs}
-        records = [r for r in store.records() if (r.agent, r.route_id, r.family, r.k, r.seed) in keys]
-        summary = write_outputs(opts, out, store, records, prep.scenarios, prep.instructions)
+        stored = store.records()
+        records = [r for r in stored if (r.agent, r.route_id, r.family, r.k, r.seed) in keys]
+        summary = write_outputs(opts, out, store, records, prep.scenarios, prep.instructions,
+                                not_shown=len(stored) - len(records))
     ep = summary["episodes"]
     return EvalResult(summary=summary, out=out, episodes=len(jobs), ran=len(todo), done=ep["done"],
                       crashed=ep["crashed"], inference=stats)
+
+
+def check_stored_routes(opts: EvalOptions, store: ResultStore, agents: set[str], prepared: set[str],
+                        skipped: tuple[str, ...]) -> None:
+    """An InputError when the store holds episodes of this evaluation's agents on a route of
+    its selection that could not be prepared this time (e.g. its scenario's network is gone):
+    a report without them would silently drop stored results."""
+    lost: dict[str, int] = {}
+    for agent, route, *_ in store.keys():  # noqa: SIM118 - a store, not a dict
+        if agent in agents and route not in prepared and (not opts.routes or route in opts.routes):
+            lost[route] = lost.get(route, 0) + 1
+    if lost:
+        route = sorted(lost)[0]
+        why = next((line for line in skipped if re.search(rf"\b{re.escape(route)}\b", line)), "")
+        raise InputError(store.path, f"route {route}", f"holds {lost[route]} stored episodes, but the route "
+                         f"cannot be loaded any more{f' ({why})' if why else ''}"
+                         f"{f'; {len(lost) - 1} more such routes' if len(lost) > 1 else ''}",
+                         "restore the route's scenario and instructions in the out folder, or rebuild the "
+                         "tables from the store alone with icrsumo report OUT")
 
 
 def run_queue(queue: list[Job], opts: EvalOptions, store: ResultStore, progress: Progress) -> None:
@@ -110,13 +137,17 @@ def report_only(out: Path, quiet: bool = False) -> dict:
     if not cfg_path.is_file() or not (out / "results.sqlite").is_file():
         raise InputError(out, "", "not an evaluation folder (no config.json / results.sqlite)",
                          "pass the --out folder of icrsumo evaluate")
-    cfg = json.loads(cfg_path.read_text(encoding="utf-8"))
+    cfg = read_json(cfg_path, "evaluation configuration", "restore it from a copy")
+    fix = "restore it from a copy"
+    expect(cfg, dict, cfg_path, "", "the configuration", fix)
+    for key, kind in (("suite", str), ("k", int), ("seed", int)):
+        expect(cfg.get(key), kind, cfg_path, key, key, fix)
     with ResultStore(out / "results.sqlite") as store:
         records = store.records()
         families = tuple(f for f in FAMILIES if any(r.family == f for r in records))
         agents = tuple(sorted({r.agent for r in records}))
         opts = EvalOptions(out=out, suite=cfg["suite"], agents=agents or (DEFAULT_AGENT,),
                            families=families or FAMILIES, k=int(cfg["k"]), seed=int(cfg["seed"]),
-                           traffic=cfg.get("traffic", "normal"), quiet=quiet)
+                           traffic=str(cfg.get("traffic", "normal")), quiet=quiet)
         return write_outputs(opts, out, store, records, out / "scenarios" if (out / "scenarios").is_dir()
                              else Path(cfg["suite"]), out / "instructions")

@@ -14,12 +14,12 @@ Every problem is an InputError naming the file and the entry.
 from __future__ import annotations
 
 import hashlib
-import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import InputError
+from ..errors import InputError, expect, short
+from ..fsio import read_json
 from ..resources import data_dir
 from ..types import Intent
 from .intent import classify_intent
@@ -92,42 +92,72 @@ def fill(text: str, junction: str = "", **slots: str) -> str:
     return _SLOT.sub(lambda m: values.get(m.group(1), m.group(0)), text)
 
 
+#: the ``format`` a bank file may declare, and the keys it may hold, by file
+_FORMATS = {None: "icrsumo-baseline-bank/1"}
+_TOP_KEYS = {"baseline": ("format", "types"), "paraphrase": ("format", "family", "intents"),
+             "misleading": ("format", "family", "intents"), "ambiguity": ("format", "family", "entries"),
+             "noise": ("format", "family", "operations")}
+_FIX = "see templates/README.md for the bank format"
+
+
+def _unknown(path: Path, place: str, d: dict, allowed, what: str = "key") -> None:
+    """InputError for the first key of ``d`` that is not in ``allowed``."""
+    extra = [k for k in d if k not in allowed]
+    if extra:
+        where = f"{place}.{extra[0]}" if place else extra[0]
+        known = ", ".join(allowed) if len(allowed) <= 8 else \
+            f"one of the {len(allowed)} {what}s of the bundled {path.name} (e.g. {', '.join(allowed[:3])})"
+        raise InputError(path, where, f"unknown {what} {short(extra[0])}", f"use {known}")
+
+
 def _load(path: Path, family: str | None) -> dict:
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(path, "", "template bank missing", "add the file or drop --templates") from None
-    except json.JSONDecodeError as err:
-        raise InputError(path, f"line {err.lineno}, column {err.colno}", f"malformed JSON ({err.msg})",
-                         "fix the JSON syntax") from None
-    if not isinstance(data, dict):
-        raise InputError(path, "top level", "must be a JSON object", "see the README's bank format")
+    if not path.exists():
+        raise InputError(path, "", "template bank missing", "add the file or drop --templates")
+    data = read_json(path, "template bank", "")
+    expect(data, dict, path, "top level", "a template bank", _FIX)
+    _unknown(path, "", data, _TOP_KEYS[family or "baseline"])
+    fmt = _FORMATS.get(family, "icrsumo-bank/1")
+    if "format" in data and data["format"] != fmt:
+        raise InputError(path, "format", f"unsupported format {short(data['format'])} (expects {fmt})",
+                         f'write "format": "{fmt}" or leave the key out')
     if family is not None and data.get("family") != family:
         raise InputError(path, "family", f"expected \"family\": \"{family}\"", "fix the family field")
     return data
 
 
 def _check_text(path: Path, place: str, text: object) -> str:
-    if not isinstance(text, str) or not text.strip():
+    expect(text, str, path, place, "text", "write the sentence as a JSON string")
+    if not text.strip():
         raise InputError(path, place, "text must be a non-empty string", "write the sentence")
     if len(text) > 300:
         raise InputError(path, place, "text longer than 300 characters", "shorten it")
+    if "\n" in text or "\r" in text:
+        raise InputError(path, place, "text spans several lines", "write it on one line")
     return text
 
 
 def _load_baseline(folder: Path) -> dict[str, tuple[str, ...]]:
     path = folder / "baseline.json"
     data = _load(path, None)
-    types = data.get("types")
-    if not isinstance(types, dict):
+    if "types" not in data:
         raise InputError(path, "types", "missing object 'types'", "see the README's bank format")
+    types = expect(data["types"], dict, path, "types", "types", _FIX)
+    _unknown(path, "types", types, tuple(BASELINE_TYPES), "instruction type")
     out = {}
     for tname, rule in BASELINE_TYPES.items():
         spec = types.get(tname)
-        if not isinstance(spec, dict) or not isinstance(spec.get("phrasings"), list):
+        if spec is None:
             raise InputError(path, f"types.{tname}", "missing type or its 'phrasings' list",
                              f"add \"{tname}\": {{\"intent\": \"{rule}\", \"phrasings\": [...]}}")
-        phr = spec["phrasings"]
+        expect(spec, dict, path, f"types.{tname}", tname, _FIX)
+        _unknown(path, f"types.{tname}", spec, ("intent", "phrasings"))
+        if "intent" in spec and spec["intent"] != rule:
+            raise InputError(path, f"types.{tname}.intent", f"is {short(spec['intent'])}, the type's rule is "
+                             f"{rule!r}", f'write "intent": "{rule}" or leave the key out')
+        if "phrasings" not in spec:
+            raise InputError(path, f"types.{tname}", "missing type or its 'phrasings' list",
+                             f"add \"{tname}\": {{\"intent\": \"{rule}\", \"phrasings\": [...]}}")
+        phr = expect(spec["phrasings"], list, path, f"types.{tname}.phrasings", "phrasings", _FIX)
         if len(phr) < MIN_BASELINE:
             raise InputError(path, f"types.{tname}", f"has {len(phr)} phrasings, needs {MIN_BASELINE}",
                              "add phrasings")
@@ -173,35 +203,52 @@ def _fills(slots: set[str]) -> list[dict[str, str]]:
 
 def _entry(path: Path, place: str, e: object, seen: set[str]) -> Entry:
     """One ``{"id", "text"}`` bank entry, its id not in ``seen`` (which it joins)."""
-    if not isinstance(e, dict) or not isinstance(e.get("id"), str):
-        raise InputError(path, place, "entry must be {\"id\": str, \"text\": str}", "fix it")
-    text = _check_text(path, place, e.get("text"))
-    if e["id"] in seen:
-        raise InputError(path, place, f"duplicate id {e['id']!r}", "give every entry its own id")
-    seen.add(e["id"])
-    return Entry(e["id"], text)
+    fix = 'write {"id": "...", "text": "..."}'
+    expect(e, dict, path, place, "entry", fix)
+    _unknown(path, place, e, ("id", "text"))
+    if "id" not in e or "text" not in e:
+        raise InputError(path, place, f"entry has no {'id' if 'id' not in e else 'text'}", fix)
+    eid = expect(e["id"], str, path, f"{place}.id", "id", fix)
+    if not eid.strip() or len(eid) > 100:
+        raise InputError(path, f"{place}.id", "id must be 1 to 100 characters", "give a short id")
+    text = _check_text(path, f"{place}.text", e["text"])
+    if eid in seen:
+        raise InputError(path, place, f"duplicate id {short(eid)}", "give every entry its own id")
+    seen.add(eid)
+    return Entry(eid, text)
+
+
+def _entry_list(path: Path, place: str, value: object, what: str) -> list:
+    """A list of at least MIN_ENTRIES bank entries (its items checked by the caller)."""
+    if value is None:
+        raise InputError(path, place, f"missing list of {what}", _FIX)
+    expect(value, list, path, place, place.rsplit(".", 1)[-1], _FIX)
+    if len(value) < MIN_ENTRIES:
+        raise InputError(path, place, f"has {len(value)} entries, needs at least {MIN_ENTRIES}",
+                         "add entries so that K draws without replacement vary")
+    return value
 
 
 def _load_intent_bank(folder: Path, family: str) -> dict[Intent, dict[str, tuple[Entry, ...]]]:
     path = folder / f"{family}.json"
     data = _load(path, family)
-    intents = data.get("intents")
-    if not isinstance(intents, dict):
+    if "intents" not in data:
         raise InputError(path, "intents", "missing object 'intents'", "see the README's bank format")
+    intents = expect(data["intents"], dict, path, "intents", "intents", _FIX)
+    _unknown(path, "intents", intents, tuple(t.value for t in NAV_INTENTS), "intent")
     out: dict[Intent, dict[str, tuple[Entry, ...]]] = {}
     seen: set[str] = set()
     for tau in NAV_INTENTS:
         spec = intents.get(tau.value)
-        if not isinstance(spec, dict):
+        if spec is None:
             raise InputError(path, f"intents.{tau.value}", "missing intent", "add plain and distance lists")
+        expect(spec, dict, path, f"intents.{tau.value}", tau.value,
+               'write {"plain": [...], "distance": [...]}')
+        _unknown(path, f"intents.{tau.value}", spec, ("plain", "distance"), "form")
         out[tau] = {}
         for form in ("plain", "distance"):
-            entries = spec.get(form)
             place0 = f"intents.{tau.value}.{form}"
-            if not isinstance(entries, list) or len(entries) < MIN_ENTRIES:
-                n = len(entries) if isinstance(entries, list) else 0
-                raise InputError(path, place0, f"has {n} entries, needs at least {MIN_ENTRIES}",
-                                 "add entries so that K draws without replacement vary")
+            entries = _entry_list(path, place0, spec.get(form), f"{form} entries")
             parsed = []
             for i, e in enumerate(entries):
                 place = f"{place0}[{i}]"
@@ -231,9 +278,7 @@ def _load_intent_bank(folder: Path, family: str) -> dict[Intent, dict[str, tuple
 def _load_ambiguity(folder: Path) -> tuple[Entry, ...]:
     path = folder / "ambiguity.json"
     data = _load(path, "ambiguity")
-    entries = data.get("entries")
-    if not isinstance(entries, list) or len(entries) < MIN_ENTRIES:
-        raise InputError(path, "entries", f"needs at least {MIN_ENTRIES} entries", "add entries")
+    entries = _entry_list(path, "entries", data.get("entries"), "entries")
     out, seen = [], set()
     for i, e in enumerate(entries):
         place = f"entries[{i}]"
@@ -253,24 +298,35 @@ def _load_noise(folder: Path) -> tuple[tuple[str, tuple[str, ...]], ...]:
     path = folder / "noise.json"
     data = _load(path, "noise")
     ops = data.get("operations")
-    if not isinstance(ops, list) or len(ops) < MIN_ENTRIES:
+    if ops is None:
+        raise InputError(path, "operations", f"needs at least {MIN_ENTRIES} operations", "add operations")
+    expect(ops, list, path, "operations", "operations", _FIX)
+    if len(ops) < MIN_ENTRIES:
         raise InputError(path, "operations", f"needs at least {MIN_ENTRIES} operations", "add operations")
     out, seen = [], set()
+    fix = 'write {"id": "...", "ops": [primitive, ...]}'
     for i, op in enumerate(ops):
         place = f"operations[{i}]"
-        well_formed = isinstance(op, dict) and isinstance(op.get("id"), str) \
-            and isinstance(op.get("ops"), list) and bool(op["ops"])
-        if not well_formed:
-            raise InputError(path, place, 'operation must be {"id": str, "ops": [primitive, ...]}',
-                             "fix it")
-        bad = [p for p in op["ops"] if p not in PRIMITIVES]
+        expect(op, dict, path, place, "operation", fix)
+        _unknown(path, place, op, ("id", "ops"))
+        if "id" not in op or "ops" not in op:
+            raise InputError(path, place, f"operation has no {'id' if 'id' not in op else 'ops'}", fix)
+        oid = expect(op["id"], str, path, f"{place}.id", "id", fix)
+        prims = expect(op["ops"], list, path, f"{place}.ops", "ops", fix)
+        if not oid.strip() or len(oid) > 100:
+            raise InputError(path, f"{place}.id", "id must be 1 to 100 characters", "give a short id")
+        if not prims:
+            raise InputError(path, f"{place}.ops", "needs at least one primitive", fix)
+        for j, p in enumerate(prims):
+            expect(p, str, path, f"{place}.ops[{j}]", "primitive", f"use {', '.join(PRIMITIVES)}")
+        bad = [p for p in prims if p not in PRIMITIVES]
         if bad:
             raise InputError(path, place, f"unknown primitive(s) {bad}",
                              f"use {', '.join(PRIMITIVES)}")
-        if op["id"] in seen:
-            raise InputError(path, place, f"duplicate id {op['id']!r}", "give every operation its own id")
-        seen.add(op["id"])
-        out.append((op["id"], tuple(op["ops"])))
+        if oid in seen:
+            raise InputError(path, place, f"duplicate id {short(oid)}", "give every operation its own id")
+        seen.add(oid)
+        out.append((oid, tuple(prims)))
     return tuple(out)
 
 
@@ -279,16 +335,13 @@ def load_banks(folder: Path | None = None) -> Banks:
     folder = Path(folder) if folder is not None else data_dir("templates")
     if not folder.is_dir():
         raise InputError(folder, "", "template folder not found", "check the --templates path")
+    baseline = _load_baseline(folder)  # each file is validated (and so readable) before it is hashed
+    paraphrase = _load_intent_bank(folder, "paraphrase")
+    misleading = _load_intent_bank(folder, "misleading")
+    ambiguity = _load_ambiguity(folder)
+    noise = _load_noise(folder)
     h = hashlib.sha256()
     for name in ("baseline", "paraphrase", "misleading", "ambiguity", "noise"):
-        p = folder / f"{name}.json"
-        h.update(name.encode() + (p.read_bytes() if p.is_file() else b""))
-    return Banks(
-        folder=folder,
-        baseline=_load_baseline(folder),
-        paraphrase=_load_intent_bank(folder, "paraphrase"),
-        misleading=_load_intent_bank(folder, "misleading"),
-        ambiguity=_load_ambiguity(folder),
-        noise=_load_noise(folder),
-        sha256=h.hexdigest(),
-    )
+        h.update(name.encode() + (folder / f"{name}.json").read_bytes())
+    return Banks(folder=folder, baseline=baseline, paraphrase=paraphrase, misleading=misleading,
+                 ambiguity=ambiguity, noise=noise, sha256=h.hexdigest())

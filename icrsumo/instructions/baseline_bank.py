@@ -227,7 +227,11 @@ def _read(path: Path) -> tuple[bytes, str]:
     if size > MAX_BYTES:
         raise _fail(path, "", f"file too large ({size} bytes, at most {MAX_BYTES})",
                     "pass an instruction dictionary (LMDrive's has about 32 kB)")
-    raw = path.read_bytes()
+    try:
+        raw = path.read_bytes()
+    except OSError as err:
+        raise _fail(path, "", f"baseline bank cannot be read ({err.strerror or err})",
+                    "check the file's permissions") from None
     if raw.startswith((b"\xff\xfe", b"\xfe\xff")) or b"\x00" in raw:
         raise _fail(path, "encoding", "is UTF-16 (or holds NUL bytes), not UTF-8", "save the file as UTF-8")
     try:

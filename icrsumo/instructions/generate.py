@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 
 from ..convert import safe_name
-from ..errors import InputError
-from ..fsio import dumps_json, write_atomic
+from ..errors import InputError, check_seed
+from ..fsio import check_out_dir, dumps_json, write_atomic
 from ..networks import load_net
-from ..scenario import Scenario, find_scenarios, read_scenario
+from ..scenario import Scenario, check_against_net, find_scenarios, read_scenario
 from ..types import InstructionSet, Maneuver
 from .banks import Banks, load_banks
 from .baseline import build_baseline
@@ -60,6 +60,7 @@ class GenerateOptions:
             raise InputError("--k", "", f"K={self.k} out of range", "use 1 to 64 (default 8)")
         if self.workers < 1:
             raise InputError("--workers", "", "must be at least 1", "give a positive count")
+        check_seed(self.seed)
 
 
 @cache
@@ -85,6 +86,7 @@ def baseline_set(sc: Scenario, banks: Banks, seed: int,
     the route seed; data collection draws other phrasings), and the route's maneuvers;
     ``baseline_bank``: LangAuto's phrasings for the types it maps."""
     net = load_net(sc.net)
+    check_against_net(sc, net)
     maneuvers = extract_maneuvers(sc, net)
     return build_baseline(sc.route_id, sc.length, maneuvers, banks, seed,
                           _highway_spans(sc, net), net.crossing_nodes, baseline_bank), maneuvers
@@ -138,6 +140,7 @@ def generate(scenarios: Path, out: Path, opts: GenerateOptions) -> tuple[list[st
     failure lines). Template banks are validated before any route is touched."""
     opts.check()
     scenarios = Path(scenarios)
+    check_out_dir(Path(out))
     if (scenarios / "scenario.json").is_file():
         dirs = [scenarios]
     elif scenarios.is_dir():

@@ -7,6 +7,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from ..fsio import read_json_doc
+from ..scenario import DocChecker
 from ..types import Instruction, InstructionSet, Intent, Maneuver, Notice
 from ..vocab import Family
 from .intent import classify_intent
@@ -39,26 +40,95 @@ def route_document(baseline: InstructionSet, variants: list[InstructionSet],
     }
 
 
-def _instruction(d: dict) -> Instruction:
+_FIX = "run icrsumo generate again"
+#: Maneuver.kind values
+MANEUVER_KINDS = ("turn_left", "turn_right", "straight", "u_turn", "roundabout", "highway_enter",
+                  "highway_exit", "lane_change_left", "lane_change_right", "follow")
+
+
+def _opt_number(c: DocChecker, d: dict, key: str, place: str) -> float | None:
+    v = d.get(key)
+    return None if v is None else c.number(v, f"{place}.{key}", 0.0)
+
+
+def _instruction(c: DocChecker, d: object, place: str) -> Instruction:
+    d = c.obj(d, place)
+    if "classified" in d:
+        c.choice(d["classified"], f"{place}.classified", Intent, "intent")
     return Instruction(
-        id=int(d["id"]), trigger=float(d["trigger"]), text=str(d["text"]), intent=Intent(d["intent"]),
-        type=str(d["type"]), distance=None if d.get("distance") is None else float(d["distance"]),
-        maneuver_pos=None if d.get("maneuver_pos") is None else float(d["maneuver_pos"]),
-        junction=d.get("junction", ""), template=d.get("template", ""), source=d.get("source", ""),
+        id=c.integer(c.key(d, "id", place), f"{place}.id", 0),
+        trigger=c.number(c.key(d, "trigger", place), f"{place}.trigger", 0.0),
+        text=c.string(c.key(d, "text", place), f"{place}.text"),
+        intent=Intent(c.choice(c.key(d, "intent", place), f"{place}.intent", Intent, "intent")),
+        type=c.string(c.key(d, "type", place), f"{place}.type"),
+        distance=_opt_number(c, d, "distance", place),
+        maneuver_pos=_opt_number(c, d, "maneuver_pos", place),
+        junction=c.string(d.get("junction", ""), f"{place}.junction"),
+        template=c.string(d.get("template", ""), f"{place}.template"),
+        source=c.string(d.get("source", ""), f"{place}.source"),
     )
+
+
+def _notice(c: DocChecker, n: object, place: str) -> Notice:
+    n = c.obj(n, place)
+    trigger = c.number(c.key(n, "trigger", place), f"{place}.trigger", 0.0)
+    end = c.number(c.key(n, "end", place), f"{place}.end", trigger)
+    return Notice(
+        id=c.integer(c.key(n, "id", place), f"{place}.id", 0), trigger=trigger, end=end,
+        text=c.string(c.key(n, "text", place), f"{place}.text"),
+        type=c.string(c.key(n, "type", place), f"{place}.type"),
+        intent=Intent(c.choice(n.get("intent", "unknown"), f"{place}.intent", Intent, "intent")),
+    )
+
+
+def _check_maneuver(c: DocChecker, m: object, place: str) -> None:
+    m = c.obj(m, place)
+    c.choice(c.key(m, "kind", place), f"{place}.kind", MANEUVER_KINDS, "maneuver kind")
+    c.number(c.key(m, "pos", place), f"{place}.pos")
+    c.choice(c.key(m, "intent", place), f"{place}.intent", Intent, "intent")
+    for k in ("junction", "junction_id"):
+        if k in m:
+            c.string(m[k], f"{place}.{k}")
+    for k in ("exit", "lanes"):
+        if k in m:
+            c.integer(m[k], f"{place}.{k}", 0)
+    for k in ("length", "end"):
+        if k in m:
+            c.number(m[k], f"{place}.{k}")
 
 
 def read_instruction_sets(path: Path) -> list[InstructionSet]:
-    """All sequences of a route file: the baseline first, then variants in file order."""
+    """All sequences of a route file: the baseline first, then variants in file order. Every
+    problem (wrong types, unknown family or intent, missing keys, triggers out of order, no
+    baseline first, a (family, k) twice) is an InputError naming the file and the key."""
     doc = read_json_doc(path, FORMAT, "instruction file", "run icrsumo generate")
-    notices = tuple(
-        Notice(id=int(n["id"]), trigger=float(n["trigger"]), end=float(n["end"]), text=n["text"],
-               type=n["type"], intent=Intent(n["intent"]))
-        for n in doc.get("notices", [])
-    )
-    return [
-        InstructionSet(route_id=doc["route_id"], family=Family(s["family"]), k=int(s["k"]),
-                       seed=int(s["seed"]), instructions=tuple(_instruction(i) for i in s["instructions"]),
-                       notices=notices)
-        for s in doc["sets"]
-    ]
+    c = DocChecker(path, _FIX)
+    route_id = c.string(c.key(doc, "route_id"), "route_id", nonempty=True, limit=200)
+    for i, m in enumerate(c.lst(doc.get("maneuvers", []), "maneuvers")):
+        _check_maneuver(c, m, f"maneuvers[{i}]")
+    notices = tuple(_notice(c, n, f"notices[{i}]")
+                    for i, n in enumerate(c.lst(doc.get("notices", []), "notices")))
+    out: list[InstructionSet] = []
+    seen: set[tuple[str, int]] = set()
+    for si, s in enumerate(c.lst(c.key(doc, "sets"), "sets", 1)):
+        place = f"sets[{si}]"
+        s = c.obj(s, place)
+        family = Family(c.choice(c.key(s, "family", place), f"{place}.family", Family, "family"))
+        k = c.integer(c.key(s, "k", place), f"{place}.k", 0)
+        if (si == 0) != (family == Family.BASELINE):
+            raise c.fail(f"{place}.family", "the first set must be the baseline" if si == 0
+                         else "only the first set may be the baseline")
+        if (family, k) in seen:
+            raise c.fail(place, f"a second set of family {family} with k={k}")
+        seen.add((family, k))
+        seed = c.integer(c.key(s, "seed", place), f"{place}.seed")
+        items = c.lst(c.key(s, "instructions", place), f"{place}.instructions")
+        instructions = tuple(_instruction(c, d, f"{place}.instructions[{i}]") for i, d in enumerate(items))
+        for i in range(1, len(instructions)):
+            if instructions[i].trigger < instructions[i - 1].trigger:
+                raise c.fail(f"{place}.instructions[{i}].trigger",
+                             f"trigger {instructions[i].trigger:g} comes before the previous one "
+                             f"({instructions[i - 1].trigger:g})", "list instructions by trigger")
+        out.append(InstructionSet(route_id=route_id, family=family, k=k, seed=seed,
+                                  instructions=instructions, notices=notices))
+    return out

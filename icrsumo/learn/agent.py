@@ -10,6 +10,10 @@ inference device is a constructor argument (``device``: cpu by default, cuda, cu
 
 Shipped checkpoints live in ``icrsumo/learn/checkpoints/<name>.pt`` with a model card
 ``<name>.md`` and the config ``<name>.toml`` that produced them.
+
+A checkpoint that is missing, damaged, refused by the safe loader or does not fit its model,
+and a device that is unknown or not available, are :class:`icrsumo.errors.InputError` lines
+naming the file (or the device) when the agent is built.
 """
 
 from __future__ import annotations
@@ -20,9 +24,12 @@ from pathlib import Path
 import numpy as np
 
 from ..agents.base import Action, EpisodeInfo, Observation
+from ..errors import InputError
 from .labels import StopClock
 
 CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
+_FIX = ("give the path of a model.pt written by icrsumo train, or a shipped agent "
+        f"({', '.join(sorted(p.stem for p in CHECKPOINTS.glob('*.pt')))})")
 
 
 @cache
@@ -31,6 +38,22 @@ def _policy(path: str, device: str):
     from .nets import Policy
 
     return Policy(Path(path), device=device)
+
+
+def checkpoint_path(checkpoint: str | Path) -> Path:
+    """The file of a checkpoint given as a path or as a shipped checkpoint's file name
+    (``bev-token.pt``); an InputError when there is no such file. Its content is checked when
+    the policy loads (:func:`icrsumo.learn.nets.read_checkpoint`)."""
+    if not str(checkpoint):
+        raise InputError("checkpoint", "", "no agent checkpoint given", _FIX)
+    path = Path(checkpoint)
+    if not path.is_absolute() and not path.is_file() and (CHECKPOINTS / path).is_file():
+        path = CHECKPOINTS / path
+    if path.is_dir():
+        raise InputError(path, "", "is a folder, not an agent checkpoint", "give the model.pt file in it")
+    if not path.is_file():
+        raise InputError(path, "", "agent checkpoint not found", _FIX)
+    return path
 
 
 class LearnedAgent:
@@ -42,11 +65,7 @@ class LearnedAgent:
     checkpoint: str = ""
 
     def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu") -> None:
-        path = Path(checkpoint or self.checkpoint)
-        if not path.is_absolute() and not path.is_file():
-            path = CHECKPOINTS / path
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: agent checkpoint not found")
+        path = checkpoint_path(checkpoint or self.checkpoint)
         self.path, self.device = str(path), device
         self.policy = _policy(self.path, device)
         self.clock = StopClock()

@@ -23,14 +23,20 @@ the last axis restores 0/1), ``speed`` (N,) m/s, ``instruction`` (N,) int16 inde
 ``instructions`` (a JSON list of the episode's instructions: text as shown, type, intent, slots;
 -1 before the first), ``waypoints`` (N, K, 2) m ego frame, ``target_speed`` (N,) m/s,
 ``perturbed`` (N,) uint8, ``t`` (N,) s and ``stopped_for`` (N,) s (time since the ego
-stopped, 0 while moving; see :class:`icrsumo.learn.labels.StopClock`).
+stopped, 0 while moving; see :class:`icrsumo.learn.labels.StopClock`). :func:`read_episode`
+reads one back, checked (``icrsumo train`` reads them with it).
+
+Bad options (an evaluation split, counts out of range, a ``--driver`` whose checkpoint is
+missing, damaged or does not fit its model) are InputErrors raised before anything is written.
 """
 
 from __future__ import annotations
 
 import io
 import json
+import shutil
 import sys
+import zipfile
 import zlib
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, replace
@@ -41,8 +47,8 @@ import numpy as np
 from ..agents.base import Action, Observation
 from ..agents.privileged import RouteOracle
 from ..convert import ConvertOptions, convert_routes, safe_name
-from ..errors import InputError
-from ..fsio import dumps_json, write_atomic
+from ..errors import InputError, check_seed, expect
+from ..fsio import dumps_json, read_json_doc, write_atomic
 from ..instructions.banks import load_banks
 from ..instructions.generate import baseline_set
 from ..resources import bundled_suites, suite_coords
@@ -50,7 +56,7 @@ from ..scenario import find_scenarios, read_scenario
 from ..types import Instruction
 from ..vocab import Termination
 from .augment import instruction_slots
-from .labels import StopClock, resample_path
+from .labels import ARC_M, StopClock, resample_path
 
 COLLECT_FORMAT = "icrsumo-collect/1"
 #: bundled suites that hold evaluation routes (icrsumo's splits, LangAuto's tracks): never
@@ -91,6 +97,28 @@ class CollectOptions:
             raise InputError("--every", "", f"{self.every} out of range", "use 1 to 50")
         if self.workers < 1:
             raise InputError("--workers", "", "must be at least 1", "give a positive count")
+        check_seed(self.seed)
+        if self.limit < 0:
+            raise InputError("--limit", "", f"{self.limit} is negative", "give a route count >= 0 (0: all)")
+        if self.driver:
+            self._check_driver()
+
+    def _check_driver(self) -> None:
+        """A ``driver`` that is a registered non-privileged agent, or a checkpoint whose file
+        loads and fits its model (checked here, before anything is written or driven)."""
+        from ..agents.registry import BUILTIN
+        from .agent import checkpoint_path
+
+        cls = BUILTIN.get(self.driver)
+        if cls is not None:
+            if getattr(cls, "privileged", False):
+                raise InputError("--driver", self.driver, "is a privileged agent (it needs the "
+                                 "simulator's state, which a driver does not see)",
+                                 "give a learned agent or a checkpoint")
+            return
+        from .nets import read_checkpoint
+
+        read_checkpoint(checkpoint_path(self.driver))
 
 
 def _is_eval_file(suite: str) -> bool:
@@ -171,6 +199,79 @@ class Collector(RouteOracle):
             c, s = np.cos(self._value), np.sin(self._value)
             return Action(waypoints=wps @ np.array([[c, s], [-s, c]]), target_speed=a.target_speed)
         return Action(waypoints=wps, target_speed=(a.target_speed or 0.0) * self._value)
+
+
+#: per-frame arrays of an episode file: trailing shape and dtype kind (u: unsigned, i: signed
+#: integer, f: float); the BEV shape is the models' input (7 channels, 128 x 128 bit-packed)
+EPISODE_ARRAYS = {"bev": ((7, 128, 16), "u"), "speed": ((), "f"), "instruction": ((), "i"),
+                  "waypoints": ((len(ARC_M), 2), "f"), "target_speed": ((), "f"), "perturbed": ((), "u"),
+                  "t": ((), "f"), "stopped_for": ((), "f")}
+_DAMAGED = (OSError, ValueError, EOFError, KeyError, TypeError, zipfile.BadZipFile, zlib.error)
+
+
+def read_episode(path: Path, keys: tuple[str, ...] = tuple(EPISODE_ARRAYS)) -> tuple[dict, list[dict]]:
+    """The arrays ``keys`` of one episode file (:data:`EPISODE_ARRAYS`) and, with
+    ``instruction`` among them, its instruction documents (``instructions``), checked: a
+    missing, truncated or damaged file, a missing or misshapen array, non-finite labels and
+    instruction indices out of range are InputErrors naming the file."""
+    path = Path(path)
+    fix = f"delete it and rerun icrsumo collect --out {path.parent.parent} with the same options"
+    if not path.is_file():
+        raise InputError(path, "", "episode file not found (listed in collect.json)",
+                         f"rerun icrsumo collect --out {path.parent.parent} with the same options: it "
+                         "drives missing episodes again")
+    out: dict[str, np.ndarray] = {}
+    want_docs = "instruction" in keys
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+        if not head:
+            raise InputError(path, "", "episode file is empty (0 bytes)", fix)
+        if not head.startswith(b"PK"):  # np.load would try to unpickle it
+            raise InputError(path, "", "is not an episode file (not an .npz archive)", fix)
+        z = np.load(path)
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            raise InputError(path, "", "is not an episode file (not an .npz archive)", fix)
+        with z:
+            missing = [k for k in (*keys, *(("instructions",) if want_docs else ())) if k not in z.files]
+            if missing:
+                raise InputError(path, "", f"episode file lacks {', '.join(missing)}", fix)
+            for k in keys:
+                out[k] = z[k]
+            text = str(z["instructions"]) if want_docs else "[]"
+    except InputError:
+        raise
+    except _DAMAGED as err:
+        detail = (str(err).splitlines() or [""])[0][:120]
+        raise InputError(path, "", f"episode file is truncated or damaged ({type(err).__name__}"
+                         f"{': ' + detail if detail else ''})", fix) from None
+    n = len(out[keys[0]]) if keys and out[keys[0]].ndim else -1
+    for k in keys:
+        tail, kind = EPISODE_ARRAYS[k]
+        a = out[k]
+        if a.ndim != 1 + len(tail) or a.shape[0] != n or a.shape[1:] != tail or a.dtype.kind not in kind:
+            want = str((n, *tail)) if n >= 0 else f"(N{''.join(f', {d}' for d in tail)})"
+            raise InputError(path, k, f"array of shape {a.shape} and dtype {a.dtype}, not {want} "
+                             f"{dict(u='unsigned integers', i='integers', f='floats')[kind]}", fix)
+        if kind == "f" and not np.isfinite(a).all():
+            raise InputError(path, k, "holds non-finite values (NaN or infinity)", fix)
+    try:
+        docs = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise InputError(path, "instructions", f"malformed JSON ({err.msg})", fix) from None
+    expect(docs, list, path, "instructions", "the instruction list", fix)
+    for i, d in enumerate(docs):
+        expect(d, dict, path, f"instructions[{i}]", "an instruction", fix)
+        for key, kinds in (("text", str), ("type", str), ("intent", str), ("slots", dict)):
+            expect(d.get(key), kinds, path, f"instructions[{i}].{key}", key, fix)
+        if d.get("distance") is not None:
+            expect(d["distance"], (int, float), path, f"instructions[{i}].distance", "distance", fix)
+        for k, v in d["slots"].items():
+            expect(v, str, path, f"instructions[{i}].slots.{k}", "a slot value", fix)
+    if "instruction" in out and len(out["instruction"]) and (
+            out["instruction"].min() < -1 or out["instruction"].max() >= len(docs)):
+        raise InputError(path, "instruction", f"indices outside -1..{len(docs) - 1}", fix)
+    return out, docs
 
 
 def _instruction_doc(ins: Instruction) -> dict:
@@ -254,14 +355,27 @@ def collect(opts: CollectOptions, out: Path, quiet: bool = False) -> dict:
     ``out/collect.json``."""
     opts.check()
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "", "exists and is not a folder", "give a new or an earlier --out folder")
     config = {k: v for k, v in asdict(opts).items() if k not in ("workers",)}
     manifest_path = out / "collect.json"
-    if manifest_path.is_file():
-        old = json.loads(manifest_path.read_text(encoding="utf-8")).get("config", {})
+    if manifest_path.exists():
+        old = read_json_doc(manifest_path, COLLECT_FORMAT, "collect manifest",
+                           "use another --out folder, or delete the damaged collect.json and rerun with "
+                           "the same options (finished episodes are kept)").get("config", {})
         if old != config:
             raise InputError(manifest_path, "config", "holds data of a different configuration",
                              "use another --out folder, or the same options")
-    dirs = find_scenarios(_scenarios(opts, out))
+    fresh = not out.exists()
+    try:
+        dirs = find_scenarios(_scenarios(opts, out))
+        if not dirs:
+            raise InputError(opts.suite, "", "no scenario to collect from (no route converted)",
+                             "fix the routes named above, or give another --suite")
+    except InputError:
+        if fresh:  # refused before any driving: leave no half-made folder behind
+            shutil.rmtree(out, ignore_errors=True)
+        raise
     if opts.limit:
         dirs = dirs[: opts.limit]
     episodes = out / "episodes"
@@ -285,10 +399,7 @@ def collect(opts: CollectOptions, out: Path, quiet: bool = False) -> dict:
     else:
         for job in jobs:
             _job(job)
-    frames = 0
-    for name in names:
-        with np.load(episodes / name) as z:
-            frames += int(z["speed"].shape[0])
+    frames = sum(len(read_episode(episodes / name, ("speed",))[0]["speed"]) for name in names)
     manifest = {"format": COLLECT_FORMAT, "config": config, "frames": frames, "episodes": names}
     write_atomic(manifest_path, dumps_json(manifest))
     return manifest

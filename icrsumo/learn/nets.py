@@ -13,12 +13,16 @@ Language encoders: ``token`` (word embeddings + bidirectional GRU, vocabulary of
 training instructions) and ``ngram`` (hashed character n-gram embeddings, masked mean, MLP).
 
 Checkpoints are plain dicts of tensors, strings and numbers, read with
-``torch.load(..., weights_only=True)``.
+``torch.load(..., weights_only=True)``; a file that is missing, empty, truncated, not a torch
+file, refused by that safe loader, or whose weights do not fit its model config is an
+:class:`icrsumo.errors.InputError` naming the file (:func:`load`, :func:`read_checkpoint`).
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+import pickle
+import re
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -26,11 +30,14 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ..errors import InputError, expect
 from ..vocab import Intent
 from .labels import ARC_M, STOP_BELOW
-from .text import TextEncoder
+from .text import ENCODERS, TextEncoder
 
 CHECKPOINT_FORMAT = "icrsumo-agent/1"
+#: format of the training state OUT/last.pt
+STATE_FORMAT = CHECKPOINT_FORMAT + "+train"
 #: intents of the auxiliary head (the baseline's; others map to follow)
 INTENTS = (Intent.FOLLOW, Intent.LEFT, Intent.RIGHT, Intent.STRAIGHT, Intent.LANE_LEFT, Intent.LANE_RIGHT)
 _ARC = torch.tensor(ARC_M, dtype=torch.float32)
@@ -150,8 +157,17 @@ def losses(out: dict[str, torch.Tensor], batch: dict[str, torch.Tensor]) -> dict
             "stop": stop, "intent": intent}
 
 
-def pick_device(name: str = "auto") -> torch.device:
-    """``auto``: CUDA when available, else CPU."""
+def pick_device(name: str = "auto", file: object = "device", place: str = "") -> torch.device:
+    """``auto``: CUDA when available, else CPU; ``cpu``, ``cuda`` or ``cuda:N``. A device that
+    is unknown or not on this machine (:func:`icrsumo.devices.check_device`) is an InputError
+    naming ``file`` and ``place`` (the config key or the command-line option it came from)."""
+    from ..devices import check_device
+
+    expect(name, str, file, place, "the device", "use cpu, cuda, cuda:N or auto")
+    try:
+        check_device(name, str(file))
+    except InputError as err:
+        raise InputError(file, place, f"device {name!r}: {err.problem}", err.fix) from None
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     return torch.device(name)
@@ -202,15 +218,45 @@ class Trainer:
         return res
 
     def state(self, extra: dict) -> dict:
-        return {"format": CHECKPOINT_FORMAT + "+train", "config": _cfg_dict(self.cfg), "step": self.step,
+        return {"format": STATE_FORMAT, "config": _cfg_dict(self.cfg), "step": self.step,
                 "model": self.model.state_dict(), "opt": self.opt.state_dict(),
                 "sched": self.sched.state_dict(), **extra}
 
-    def load_state(self, state: dict) -> None:
-        self.model.load_state_dict(state["model"])
-        self.opt.load_state_dict(state["opt"])
-        self.sched.load_state_dict(state["sched"])
-        self.step = int(state["step"])
+    def load_state(self, state: dict, path: Path | str = "checkpoint") -> None:
+        """Resume from :meth:`state` (read from ``path``); a state that does not fit this
+        trainer (format, model config, weights, optimizer, step) is an InputError naming
+        ``path`` (the trainer is not to be used then)."""
+        fix = _RESUME_FIX
+        if state.get("format") != STATE_FORMAT:
+            raise InputError(path, "format", f"not an icrsumo training checkpoint (format "
+                             f"{_short(state.get('format'))})", fix)
+        if state.get("config") != _cfg_dict(self.cfg):
+            raise InputError(path, "config", "holds another model configuration", fix)
+        check_weights(state.get("model"), self.cfg, path, "model", fix)
+        step = expect(state.get("step"), int, path, "step", "the step", fix)
+        if not 0 <= step <= self.steps:
+            raise InputError(path, "step", f"step {step} is outside 0..{self.steps}", fix)
+        opt = expect(state.get("opt"), dict, path, "opt", "the optimizer state", fix)
+        sched = expect(state.get("sched"), dict, path, "sched", "the schedule state", fix)
+        params = list(self.model.parameters())
+        per_param = opt.get("state", {})
+        expect(per_param, dict, path, "opt.state", "the optimizer state", fix)
+        for i, st in per_param.items():
+            if not isinstance(i, int) or not 0 <= i < len(params) or not isinstance(st, dict):
+                raise InputError(path, f"opt.state[{i!r}]", "does not fit the model's parameters", fix)
+            for k, v in st.items():
+                if k in ("exp_avg", "exp_avg_sq") and (not isinstance(v, torch.Tensor)
+                                                       or v.shape != params[i].shape):
+                    raise InputError(path, f"opt.state[{i}].{k}", "does not fit the model's parameters", fix)
+        try:
+            self.model.load_state_dict(state["model"])
+            self.opt.load_state_dict(opt)
+            self.sched.load_state_dict(sched)
+            self.sched.get_last_lr()
+        except (KeyError, ValueError, TypeError, RuntimeError, IndexError, AttributeError) as err:
+            raise InputError(path, "opt/sched", f"optimizer state does not fit ({_first_line(err)})",
+                             fix) from None
+        self.step = step
 
 
 def _cfg_dict(cfg: ModelConfig) -> dict:
@@ -219,10 +265,77 @@ def _cfg_dict(cfg: ModelConfig) -> dict:
     return d
 
 
-def config_from_dict(d: dict) -> ModelConfig:
-    d = dict(d)
-    d["vocab"] = tuple(d.get("vocab", ()))
-    return ModelConfig(**d)
+_CHECKPOINT_FIX = "use a model.pt written by icrsumo train, or a shipped agent (bev-token, bev-ngram, ...)"
+_RESUME_FIX = "delete it to start over, or use another --out folder"
+
+
+def _first_line(err: BaseException) -> str:
+    """The first sentence of an exception's message, without terminal escapes, for one line."""
+    text = re.sub(r"\x1b\[[0-9;]*m", "", str(err)).strip()
+    text = (text.splitlines() or [""])[0].split(". ")[0].strip()
+    text = text[:160] + ("..." if len(text) > 160 else "")
+    return f"{type(err).__name__}: {text}" if text else type(err).__name__
+
+
+def _short(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def config_from_dict(d: object, path: Path | str = "checkpoint", place: str = "config",
+                     fix: str = _CHECKPOINT_FIX) -> ModelConfig:
+    """The :class:`ModelConfig` of a checkpoint's ``config`` dict; unknown keys, values of the
+    wrong type and out-of-range sizes are InputErrors naming ``path`` and the key."""
+    d = dict(expect(d, dict, path, place, "the model config", fix))
+    known = {f.name: f for f in fields(ModelConfig)}
+    for key in d:
+        if key not in known:
+            raise InputError(path, f"{place}.{key}", "unknown model option", fix)
+    vocab = expect(d.get("vocab", []), (list, tuple), path, f"{place}.vocab", "the vocabulary", fix)
+    d["vocab"] = tuple(vocab)
+    for i, w in enumerate(d["vocab"]):
+        expect(w, str, path, f"{place}.vocab[{i}]", "a word", fix)
+    for key, f in known.items():
+        if key != "vocab" and key in d:
+            expect(d[key], {"str": str, "int": int}[f.type], path, f"{place}.{key}", "the value", fix)
+    cfg = ModelConfig(**d)
+    if cfg.encoder not in ENCODERS:
+        raise InputError(path, f"{place}.encoder", f"unknown encoder {_short(cfg.encoder)}", fix)
+    for key in ("text_len", "embed", "width", "hidden"):
+        if getattr(cfg, key) < 1:
+            raise InputError(path, f"{place}.{key}", f"{getattr(cfg, key)} is not a positive size", fix)
+    if cfg.lang < 2 or cfg.lang % 2:
+        raise InputError(path, f"{place}.lang", f"{cfg.lang} is not a positive even size", fix)
+    if cfg.encoder == "ngram" and cfg.buckets < 2:
+        raise InputError(path, f"{place}.buckets", f"{cfg.buckets} hash buckets (at least 2)", fix)
+    if cfg.encoder == "token" and len(cfg.vocab) < 2:
+        raise InputError(path, f"{place}.vocab", f"{len(cfg.vocab)} words (at least <pad> and <unk>)", fix)
+    return cfg
+
+
+def check_weights(weights: object, cfg: ModelConfig, path: Path | str = "checkpoint", place: str = "model",
+                  fix: str = _CHECKPOINT_FIX) -> dict:
+    """``weights`` if they are a state dict of :class:`BevLanguageNet` with ``cfg`` (the same
+    names, shapes and floating-point tensors); an InputError naming ``path`` otherwise. The
+    expected shapes come from a model on the ``meta`` device: nothing is allocated."""
+    weights = expect(weights, dict, path, place, "the weights", fix)
+    with torch.device("meta"):
+        want = {k: tuple(v.shape) for k, v in BevLanguageNet(cfg).state_dict().items()}
+    missing = [k for k in want if k not in weights]
+    extra = [str(k) for k in weights if k not in want]
+    if missing or extra:
+        parts = ([f"{len(missing)} missing (e.g. {missing[0]})"] if missing else []) + (
+            [f"{len(extra)} unexpected (e.g. {extra[0]})"] if extra else [])
+        raise InputError(path, place, f"weights do not fit the model config: {', '.join(parts)}", fix)
+    for k, shape in want.items():
+        t = weights[k]
+        if not isinstance(t, torch.Tensor) or not t.is_floating_point():
+            kind = f"tensor of {t.dtype}" if isinstance(t, torch.Tensor) else type(t).__name__
+            raise InputError(path, f"{place}.{k}", f"is a {kind}, not a floating-point tensor", fix)
+        if tuple(t.shape) != shape:
+            raise InputError(path, f"{place}.{k}", f"shape {tuple(t.shape)} does not fit the model "
+                             f"config's {shape}", fix)
+    return weights
 
 
 def save(obj: dict, path: Path) -> None:
@@ -234,9 +347,57 @@ def save(obj: dict, path: Path) -> None:
     tmp.replace(path)
 
 
-def load(path: Path) -> dict:
-    """Read a checkpoint with ``weights_only=True`` (no code runs from the file)."""
-    return torch.load(Path(path), map_location="cpu", weights_only=True)
+def load(path: Path, what: str = "checkpoint", fix: str = _CHECKPOINT_FIX) -> dict:
+    """Read a checkpoint dict with ``weights_only=True`` (no code runs from the file). A file
+    that is missing, empty, truncated, not a torch file, refused by the safe loader or not a
+    dict is an InputError naming it (``what`` names the file in the message)."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(path, "", f"is a folder, not a {what} file", "pass the .pt file")
+    try:
+        if path.stat().st_size == 0:
+            raise InputError(path, "", f"{what} is empty (0 bytes)", fix)
+        obj = torch.load(path, map_location="cpu", weights_only=True)
+    except InputError:
+        raise
+    except FileNotFoundError:
+        raise InputError(path, "", f"{what} not found", "check the path") from None
+    except PermissionError:
+        raise InputError(path, "", f"{what} is not readable (permission denied)",
+                         "check the file's permissions") from None
+    except pickle.UnpicklingError as err:
+        if "Weights only load failed" not in str(err):
+            raise InputError(path, "", f"{what} is damaged, not a torch file ({_first_line(err)})",
+                             fix) from None
+        m = re.search(r"GLOBAL ([\w.]+)", str(err))
+        held = f" ({m.group(1)})" if m else ""
+        raise InputError(path, "", f"{what} refused by torch.load(weights_only=True): it holds a pickled "
+                         f"Python object{held}, not only tensors, numbers and strings", "never load an "
+                         "untrusted pickle; " + fix) from None
+    except EOFError:
+        raise InputError(path, "", f"{what} is truncated", fix) from None
+    except MemoryError:
+        raise
+    except Exception as err:  # torch's reader: truncated zip archive, not a torch file, ...
+        raise InputError(path, "", f"{what} is truncated or not a torch file ({_first_line(err)})",
+                         fix) from None
+    if not isinstance(obj, dict):
+        raise InputError(path, "", f"{what} holds a {type(obj).__name__}, not an icrsumo checkpoint", fix)
+    return obj
+
+
+def read_checkpoint(path: Path) -> tuple[dict, ModelConfig]:
+    """An inference checkpoint (:func:`export`) and its model config, checked: its format, its
+    config and that its weights fit that config; problems are InputErrors naming ``path``."""
+    ck = load(path, "agent checkpoint")
+    fmt = ck.get("format")
+    if fmt != CHECKPOINT_FORMAT:
+        hint = " (a training state: use the model.pt beside it)" if fmt == STATE_FORMAT else ""
+        raise InputError(path, "format", f"not an icrsumo agent checkpoint (format {_short(fmt)}){hint}",
+                         _CHECKPOINT_FIX)
+    cfg = config_from_dict(ck.get("config"), path)
+    check_weights(ck.get("model"), cfg, path)
+    return ck, cfg
 
 
 def export(trainer: Trainer, path: Path, meta: dict) -> None:
@@ -261,17 +422,14 @@ class Policy:
     GPU and CPU results differ by float rounding."""
 
     def __init__(self, path: Path, threads: int | None = 1, device: str = "cpu") -> None:
-        ck = load(path)
-        if ck.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"{path}: not an icrsumo agent checkpoint (format {ck.get('format')!r})")
+        self.device = pick_device(device)
+        ck, self.cfg = read_checkpoint(path)
         if threads:
             torch.set_num_threads(threads)
-        self.cfg = config_from_dict(ck["config"])
         self.meta = ck.get("meta", {})
         self.model = BevLanguageNet(self.cfg)
         self.model.load_state_dict(ck["model"])
         self.model.eval()
-        self.device = pick_device(device)
         if self.device.type == "cuda":
             torch.backends.cudnn.deterministic = True
             torch.backends.cudnn.benchmark = False

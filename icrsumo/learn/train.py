@@ -11,22 +11,31 @@ exported (float32, loaded with ``torch.load(..., weights_only=True)``).
 
 Runs on CPU (slowly) or on a GPU (``device = "auto"`` picks CUDA when present); the whole
 dataset (bit-packed rasters) is moved to the device once, so a GPU is never starved.
+
+Bad input is an :class:`icrsumo.errors.InputError` naming the file, the place and the fix: the
+config (encoding, TOML syntax, unknown keys, every key's type from :class:`TrainConfig`'s field
+types, ranges, a device that is unknown or not available), the data folders (manifest, episode
+files) and a resume checkpoint ``OUT/last.pt``. All of it is checked before OUT is made or
+touched, so a refused run writes nothing.
 """
 
 from __future__ import annotations
 
+import difflib
 import json
+import math
+import re
 import sys
 import time
 import tomllib
 import zlib
-from dataclasses import asdict, dataclass, fields
+from dataclasses import Field, asdict, dataclass, fields
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
-from ..fsio import dumps_json, write_atomic
+from ..errors import InputError, expect
+from ..fsio import dumps_json, read_json_doc, read_text, write_atomic
 from .augment import augment
 from .text import ENCODERS, build_vocab
 
@@ -58,43 +67,117 @@ class TrainConfig:
     variants: int = 24
     device: str = "auto"
 
-    def check(self, where: str) -> None:
+    def check(self, where: str | Path = "train config", sources: dict[str, str] | None = None,
+              places: dict[str, str] | None = None) -> None:
+        """InputErrors for a value of the wrong type (from the field types), out of range, or a
+        device that is unknown or not available here. ``where`` names the config (its file),
+        ``sources`` the command-line option a key came from (``{"steps": "--steps"}``) and
+        ``places`` where in the file each key is (``{"lr": "line 4 (lr)"}``)."""
+        sources, places = sources or {}, places or {}
+
+        def loc(name: str) -> tuple[str, str]:
+            if name in sources:
+                return sources[name], ""
+            return str(where), places.get(name, name)
+
+        def fail(name: str, problem: str, fix: str) -> None:
+            raise InputError(*loc(name), problem, fix)
+
+        for f in fields(self):
+            value = getattr(self, f.name)
+            kind = _kind(f)
+            if kind is float and isinstance(value, int) and not isinstance(value, bool):
+                continue
+            expect(value, kind, *loc(f.name), f.name, f"write e.g. {f.name} = {_toml(f.default)}")
+            if kind is float and not math.isfinite(value):
+                fail(f.name, f"{f.name} must be a finite number, not {value}",
+                     f"write e.g. {f.name} = {f.default}")
         if self.encoder not in ENCODERS:
-            raise InputError(where, "encoder", f"unknown encoder {self.encoder!r}",
-                             f"use one of {', '.join(ENCODERS)}")
-        for name in ("steps", "batch", "eval_every", "checkpoint_every", "buckets", "width", "hidden",
-                     "variants"):
+            fail("encoder", f"unknown encoder {self.encoder!r}", f"use one of {', '.join(ENCODERS)}")
+        for name in ("steps", "batch", "eval_every", "checkpoint_every", "width", "hidden", "variants"):
             if getattr(self, name) < 1:
-                raise InputError(where, name, "must be at least 1", "give a positive number")
+                fail(name, f"{name} must be at least 1, not {getattr(self, name)}", "give a positive number")
+        if self.buckets < 2:
+            fail("buckets", f"buckets must be at least 2, not {self.buckets}", "give e.g. 8192")
+        if self.text_len < 0:
+            fail("text_len", f"text_len must not be negative, not {self.text_len}",
+                 "give 0 (the encoder's default) or a positive length")
+        if not 0 <= self.seed < 2**63:
+            fail("seed", f"seed {self.seed} out of range", "use 0 to 2**63 - 1")
+        if not self.lr > 0:
+            fail("lr", f"lr must be positive, not {self.lr}", "give e.g. lr = 0.001")
+        if not self.weight_decay >= 0:
+            fail("weight_decay", f"weight_decay must not be negative, not {self.weight_decay}",
+                 "give 0 or e.g. 0.0001")
         if not 0.0 <= self.val_fraction < 0.5:
-            raise InputError(where, "val_fraction", f"{self.val_fraction} out of range", "use 0 to 0.5")
+            fail("val_fraction", f"val_fraction {self.val_fraction} out of range", "use 0 to 0.5")
+        for name in ("p_paraphrase", "p_noise"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                fail(name, f"{name} {getattr(self, name)} is not a probability", "use 0 to 1")
+        from .nets import pick_device
+
+        pick_device(self.device, *loc("device"))
+
+
+_KINDS = {"str": str, "bool": bool, "int": int, "float": float}
+
+
+def _kind(f: Field) -> type:
+    """The type of a config field (annotations are strings here: ``from __future__``)."""
+    return f.type if isinstance(f.type, type) else _KINDS[f.type]
+
+
+def _toml(value: object) -> str:
+    """``value`` as a TOML literal (for the fixes in messages)."""
+    return ("true" if value else "false") if isinstance(value, bool) else json.dumps(value)
+
+
+def _toml_error(path: Path, err: tomllib.TOMLDecodeError) -> InputError:
+    m = re.fullmatch(r"(.*) \(at (line \d+, column \d+|end of document)\)", str(err), re.S)
+    msg, place = (m.group(1), m.group(2)) if m else (str(err), "")
+    return InputError(path, place, f"not valid TOML ({msg})", "fix the TOML syntax there")
 
 
 def read_config(path: Path, **overrides: object) -> TrainConfig:
-    """Read a TOML config; ``overrides`` (non-None) replace its values."""
+    """Read a TOML config; ``overrides`` (non-None: the command line's ``--steps``,
+    ``--device``, ...) replace its values. Every problem (file, encoding, syntax, unknown key,
+    type, range, device) is an InputError naming the file and the key, or the option."""
     path = Path(path)
+    text = read_text(path, "training config", "give the path of a TOML training config (see "
+                     "icrsumo/learn/checkpoints/*.toml)")
     try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(path, "", "no such file", "give the path of a TOML training config") from None
+        raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
-        raise InputError(path, "", f"not valid TOML ({err})", "fix the syntax") from None
-    known = {f.name: f.type for f in fields(TrainConfig)}
-    for key, value in raw.items():
+        raise _toml_error(path, err) from None
+    known = {f.name: f for f in fields(TrainConfig)}
+    places = {key: _key_line(text, key) for key in raw}
+    for key in raw:
         if key not in known:
-            raise InputError(path, key, "unknown key", f"use some of {', '.join(known)}")
-        default = getattr(TrainConfig(), key)
-        if isinstance(default, bool) != isinstance(value, bool) or (
-                not isinstance(value, type(default)) and not (isinstance(default, float)
-                                                               and isinstance(value, int))):
-            raise InputError(path, key, f"{value!r} is not a {type(default).__name__}",
-                             "fix the value's type")
-    raw.update({k: v for k, v in overrides.items() if v is not None})
-    if isinstance(raw.get("lr"), int):
-        raw["lr"] = float(raw["lr"])
+            close = difflib.get_close_matches(key, known, n=1)
+            raise InputError(path, places[key], f"unknown key {key!r}",
+                             (f"did you mean {close[0]}? " if close else "") + f"keys: {', '.join(known)}")
+    sources = {}
+    for key, value in overrides.items():
+        if value is not None:
+            raw[key] = value
+            sources[key] = "--" + key.replace("_", "-")
+    for key, value in raw.items():  # integers given for float keys (lr = 1) are floats
+        if _kind(known[key]) is float and isinstance(value, int) and not isinstance(value, bool):
+            raw[key] = float(value)
     cfg = TrainConfig(**raw)
-    cfg.check(str(path))
+    cfg.check(path, sources, places)
     return cfg
+
+
+def _key_line(text: str, key: str) -> str:
+    """``line N (key)`` of the first line that sets top-level ``key`` (or opens table
+    ``[key]``), else ``key``."""
+    name = rf"""(?:{re.escape(key)}|"{re.escape(key)}"|'{re.escape(key)}')"""
+    pat = re.compile(rf"\s*(?:{name}\s*[=.]|\[\s*{name}\s*[\].])")
+    for n, line in enumerate(text.splitlines(), 1):
+        if pat.match(line):
+            return f"line {n} ({key})"
+    return key
 
 
 # --------------------------------------------------------------------------- data
@@ -117,16 +200,41 @@ class Dataset:
 _EMPTY_DOC = {"text": "", "type": "none", "intent": "follow", "distance": None, "slots": {}}
 
 
+def _episode_files(d: Path) -> list[Path]:
+    """The episode files that ``d/collect.json`` lists; InputErrors for a missing folder or
+    manifest, a manifest that is not JSON or not a collect manifest, and an empty list."""
+    from .collect import COLLECT_FORMAT
+
+    fix = f"run icrsumo collect --out {d} first"
+    if not d.exists():
+        raise InputError(d, "", "data folder not found", f"check the --data path, or {fix}")
+    if not d.is_dir():
+        raise InputError(d, "", "is not a folder", "give the folder written by icrsumo collect --out DIR")
+    manifest = d / "collect.json"
+    if not manifest.exists():
+        raise InputError(d, "collect.json", "no collected data here (not an icrsumo collect folder)", fix)
+    doc = read_json_doc(manifest, COLLECT_FORMAT, "collect manifest",
+                        f"rerun icrsumo collect --out {d} with the same options")
+    names = expect(doc.get("episodes"), list, manifest, "episodes", "the episode list",
+                   f"rerun icrsumo collect --out {d} with the same options")
+    if not names:
+        raise InputError(manifest, "episodes", "lists no episodes", "collect from more routes or passes")
+    for i, n in enumerate(names):
+        expect(n, str, manifest, f"episodes[{i}]", "an episode file name", fix)
+        if Path(n).name != n or not n.endswith(".npz"):
+            raise InputError(manifest, f"episodes[{i}]", f"{n!r} is not an episode file name (NAME.npz)",
+                             f"rerun icrsumo collect --out {d} with the same options")
+    return [d / "episodes" / n for n in names]
+
+
 def load_dataset(data: Path | list[Path]) -> Dataset:
-    """Read ``DATA/collect.json`` and its episodes (of one or several folders)."""
+    """Read ``DATA/collect.json`` and its episodes (of one or several folders). A missing or
+    damaged folder, manifest or episode file, and data without frames, are InputErrors naming
+    the file."""
+    from .collect import read_episode
+
     folders = [Path(d) for d in (data if isinstance(data, list) else [data])]
-    files = []
-    for d in folders:
-        manifest = d / "collect.json"
-        if not manifest.is_file():
-            raise InputError(d, "collect.json", "no collected data here",
-                             "run icrsumo collect --out DIR first")
-        files += [d / "episodes" / n for n in json.loads(manifest.read_text(encoding="utf-8"))["episodes"]]
+    files = [f for d in folders for f in _episode_files(d)]
     parts: dict[str, list] = {k: [] for k in ("bev", "speed", "stopped_for", "waypoints", "target_speed",
                                               "doc", "route")}
     docs, doc_index, routes = [dict(_EMPTY_DOC)], {"": 0}, []
@@ -134,21 +242,46 @@ def load_dataset(data: Path | list[Path]) -> Dataset:
         route = path.name.rsplit("__p", 1)[0]
         if route not in routes:
             routes.append(route)
-        with np.load(path) as z:
-            local = []
-            for d in json.loads(str(z["instructions"])):
-                key = json.dumps([d["text"], d["type"], d["intent"], d["distance"], d["slots"]])
-                if key not in doc_index:
-                    doc_index[key] = len(docs)
-                    docs.append(d)
-                local.append(doc_index[key])
-            instr = z["instruction"].astype(np.int64)
-            parts["doc"].append(np.where(instr >= 0, np.asarray(local + [0])[instr], 0))
-            for k in ("bev", "speed", "stopped_for", "waypoints", "target_speed"):
-                parts[k].append(z[k])
-            parts["route"].append(np.full(len(instr), routes.index(route), dtype=np.int64))
+        z, ep_docs = read_episode(path, ("instruction", "bev", "speed", "stopped_for", "waypoints",
+                                         "target_speed"))
+        local = []
+        for d in ep_docs:
+            key = json.dumps([d["text"], d["type"], d["intent"], d.get("distance"), d["slots"]])
+            if key not in doc_index:
+                doc_index[key] = len(docs)
+                docs.append(d)
+            local.append(doc_index[key])
+        instr = z["instruction"].astype(np.int64)
+        parts["doc"].append(np.where(instr >= 0, np.asarray(local + [0])[instr], 0))
+        for k in ("bev", "speed", "stopped_for", "waypoints", "target_speed"):
+            parts[k].append(z[k])
+        parts["route"].append(np.full(len(instr), routes.index(route), dtype=np.int64))
     cat = {k: np.concatenate(v) for k, v in parts.items()}
+    if not len(cat["speed"]):
+        raise InputError(folders[0], "", "the collected episodes hold no frames",
+                         "collect from more routes or passes")
     return Dataset(docs=docs, routes=routes, **cat)
+
+
+def _log_lines(path: Path, step: int) -> list[str]:
+    """The lines of an earlier run's ``train_log.jsonl`` up to ``step`` (those past it are about
+    to be redone); a line that is not a JSON object with a step is an InputError."""
+    kept = []
+    for n, ln in enumerate(read_text(path, "training log").splitlines(), 1):
+        if not ln:
+            continue
+        try:
+            doc = json.loads(ln)
+            s = doc["step"]
+        except (json.JSONDecodeError, TypeError, KeyError):
+            raise InputError(path, f"line {n}", "not a JSON line with a step",
+                             "delete the damaged line, or the whole log") from None
+        if not isinstance(s, int) or isinstance(s, bool):
+            raise InputError(path, f"line {n}", "its step is not an integer",
+                             "delete the damaged line, or the whole log")
+        if s <= step:
+            kept.append(ln)
+    return kept
 
 
 def split(ds: Dataset, val_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -185,13 +318,20 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
 
     from . import nets
 
+    # everything is checked before OUT is made or touched: a refused run writes nothing
+    cfg.check()
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "", "exists and is not a folder", "give a new folder, or an earlier run's")
     cfg_doc = asdict(cfg)
     last = out / "last.pt"
     state = None
-    if last.is_file():
-        state = nets.load(last)
+    if last.exists():
+        fix = "delete it to start over, or use another --out folder"
+        state = nets.load(last, "training checkpoint", fix)
+        if state.get("format") != nets.STATE_FORMAT:
+            raise InputError(last, "format", f"not an icrsumo training checkpoint (format "
+                             f"{str(state.get('format'))[:40]!r})", fix)
         if state.get("train_config") != cfg_doc:
             raise InputError(last, "train_config", "was written with a different config",
                              "use another --out folder, or the same config")
@@ -199,6 +339,11 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
     t0 = time.perf_counter()
     ds = load_dataset(data)
     tr_idx, va_idx = split(ds, cfg.val_fraction, cfg.seed)
+    if not len(tr_idx):
+        folders = data if isinstance(data, list) else [data]
+        raise InputError(folders[0], "", f"all {len(ds.routes)} routes of the data fall in the validation "
+                         f"split (val_fraction {cfg.val_fraction})",
+                         "collect more routes, or lower val_fraction in the config")
     pool = text_pool(ds, cfg, np.random.default_rng([cfg.seed, 2]))
     text_len = cfg.text_len or _DEFAULT_TEXT_LEN[cfg.encoder]
     vocab = tuple(build_vocab(t for texts in pool for t in texts)) if cfg.encoder == "token" else ()
@@ -210,15 +355,26 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
     n_texts = np.array([len(p) for p in pool])
     for i, texts in enumerate(pool):
         ids[i, : len(texts)] = enc.encode_many(texts)
-    device = nets.pick_device(cfg.device)
+    device = nets.pick_device(cfg.device, "device")
     trainer = nets.Trainer(mcfg, cfg.seed, cfg.lr, cfg.weight_decay, cfg.steps, device)
     log_path = out / "train_log.jsonl"
+    kept: list[str] = []
     if state is not None:
-        trainer.load_state(state)
-        rng.bit_generator.state = state["rng"]
-        if log_path.is_file():  # drop lines past the checkpoint: they are about to be redone
-            kept = [ln for ln in log_path.read_text(encoding="utf-8").splitlines()
-                    if ln and json.loads(ln)["step"] <= trainer.step]
+        trainer.load_state(state, last)
+        try:
+            rng.bit_generator.state = state.get("rng")
+        except (TypeError, ValueError, KeyError):
+            raise InputError(last, "rng", "not a random generator state", "delete it to start over, "
+                             "or use another --out folder") from None
+        if log_path.exists():  # drop lines past the checkpoint: they are about to be redone
+            kept = _log_lines(log_path, trainer.step)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise InputError(out, "", f"cannot make the output folder ({err.strerror or err})",
+                         "give a folder in a writable place") from None
+    if state is not None:
+        if log_path.exists():
             write_atomic(log_path, "".join(ln + "\n" for ln in kept))
     elif log_path.is_file():
         log_path.unlink()

@@ -7,11 +7,13 @@ from __future__ import annotations
 import multiprocessing
 import multiprocessing.connection
 import signal
+import threading
 import time
 from collections.abc import Iterator
 from typing import Any
 
 from ...agents.watch import SlotWatch, Unwatched, overran, timeout_message
+from ...errors import raise_interrupted
 from ...vocab import ErrorKind
 from ..execute import EpisodeWorker, Outcome
 from ..plan import Job
@@ -63,18 +65,29 @@ class _Process:
         self.conn.close()
 
 
+def _run_in_process(jobs: list[Job]) -> Iterator[tuple[Job, Outcome]]:
+    """Run ``jobs`` here, one at a time. Ctrl-C raises :class:`~icrsumo.errors.Interrupted` while
+    they run (from the main thread), so that a ``KeyboardInterrupt`` raised by agent code is told
+    apart from the user's and stored as a crash."""
+    main = threading.current_thread() is threading.main_thread()
+    old = signal.signal(signal.SIGINT, raise_interrupted) if main else None
+    worker = EpisodeWorker(Unwatched())
+    try:
+        for job in jobs:
+            yield job, worker.run(job)
+    finally:
+        worker.close()
+        if main:
+            signal.signal(signal.SIGINT, old)
+
+
 def run_local(jobs: list[Job], workers: int, timeout: float | None = None) -> Iterator[tuple[Job, Outcome]]:
     """Run ``jobs`` in ``workers`` processes, yielding each job with its outcome as it ends; a
     worker whose agent call overruns ``timeout`` s (or that dies) is replaced and its episode
     reported as timed out (or crashed). ``workers == 1`` without a timeout runs in this
     process."""
     if workers == 1 and timeout is None:
-        worker = EpisodeWorker(Unwatched())
-        try:
-            for job in jobs:
-                yield job, worker.run(job)
-        finally:
-            worker.close()
+        yield from _run_in_process(jobs)
         return
     if not jobs:
         return

@@ -165,3 +165,42 @@ class Dies(Cruise):
         import os
 
         os._exit(3)
+
+
+class Exits(Cruise):
+    """Calls ``sys.exit`` on its second decision (as a careless script would)."""
+
+    name = "exits"
+
+    def act(self, obs: Observation) -> Action:
+        import sys
+
+        self.n = getattr(self, "n", 0) + 1
+        if self.n == 2:
+            sys.exit(0)
+        return super().act(obs)
+
+
+class Interrupts(Cruise):
+    """Raises ``KeyboardInterrupt`` itself on its second decision."""
+
+    name = "interrupts"
+
+    def act(self, obs: Observation) -> Action:
+        self.n = getattr(self, "n", 0) + 1
+        if self.n == 2:
+            raise KeyboardInterrupt
+        return super().act(obs)
+
+
+class Flaky(Cruise):
+    """Crashes while a file ``flaky.marker`` exists in the working folder (a transient fault)."""
+
+    name = "flaky"
+
+    def act(self, obs: Observation) -> Action:
+        from pathlib import Path
+
+        if Path("flaky.marker").exists():
+            raise ConnectionError("the service it needs is down")
+        return super().act(obs)
