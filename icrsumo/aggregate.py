@@ -1,6 +1,6 @@
 """ICR-Drive aggregation of stored episodes: means, paired deltas, RD/TO split, bootstrap CIs.
 
-Pure (numpy only): the same records, in any order, give the same summary bytes.
+Pure (numpy and scipy's Wilcoxon test): the same records, in any order, give the same summary bytes.
 
 Definitions (per agent and family f; crashed episodes are counted and excluded from every mean):
 
@@ -14,7 +14,15 @@ Definitions (per agent and family f; crashed episodes are counted and excluded f
   not depend on which other agents or families are in the records);
 - RD, TO: fraction of the family's episodes whose termination class is RD / TO;
 - baseline_done_variant_failed: routes whose baseline terminated "done" while at least one
-  (non-crashed) variant of the family did not.
+  (non-crashed) variant of the family did not;
+- pdr_DS / pdr_RC: the relative drop 1 - M_variant / M_baseline, both means over the family's
+  paired episodes (each variant episode against its route's baseline); None when the baseline
+  mean is 0;
+- p_value: a two-sided Wilcoxon signed-rank test (``scipy.stats.wilcoxon``, zero differences
+  dropped) of the per-route mean dDS against 0, Holm-Bonferroni-corrected over the families
+  of the agent (``p_value_raw``: uncorrected); 1.0 when every route's dDS is 0;
+- flips: {"lost": pairs (route, k) whose baseline terminated "done" and whose variant did
+  not, "gained": the reverse}.
 
 Values are rounded (4 decimals, IS and dIS 6); a quantity without data is ``None``, never NaN.
 """
@@ -101,13 +109,19 @@ def _family_block(recs: list[EpisodeRecord], base: dict[_Key, EpisodeRecord], *,
 
     per_route: dict[_Key, list[tuple[float, float, float]]] = {}
     failed: set[_Key] = set()
+    lost = gained = 0
+    paired_base: list[tuple[float, float]] = []  # (DS, RC) of the baseline of every pair
     for r in recs:  # sorted, so per-route lists are in k order
         b = base.get((r.route_id, r.seed))
         if b is None:
             continue
         per_route.setdefault((r.route_id, r.seed), []).append((r.ds - b.ds, r.rc - b.rc, r.is_ - b.is_))
+        paired_base.append((b.ds, b.rc))
         if b.termination_class == "done" and r.termination_class != "done":
             failed.add((r.route_id, r.seed))
+            lost += 1
+        elif b.termination_class != "done" and r.termination_class == "done":
+            gained += 1
     routes = sorted(per_route)
     deltas = [np.asarray(per_route[k], dtype=float) for k in routes]
     if deltas:
@@ -116,17 +130,55 @@ def _family_block(recs: list[EpisodeRecord], base: dict[_Key, EpisodeRecord], *,
         worst = float(np.mean([d[:, 0].min() for d in deltas]))
         route_means = np.stack([d[:, :2].mean(axis=0) for d in deltas])  # (R, 2)
         ci = bootstrap_ci(route_means, n_boot=n_boot, seed=boot_seed)
+        base_mean = np.asarray(paired_base, dtype=float).mean(axis=0)  # (DS, RC)
         out.update(
             dDS=_rnd(d_mean[0]), dRC=_rnd(d_mean[1]), dIS=_rnd(d_mean[2], 6), worst_dDS=_rnd(worst),
             dDS_ci95=[_rnd(ci[0, 0]), _rnd(ci[1, 0])], dRC_ci95=[_rnd(ci[0, 1]), _rnd(ci[1, 1])],
+            pdr_DS=relative_drop(base_mean[0], d_mean[0]), pdr_RC=relative_drop(base_mean[1], d_mean[1]),
+            p_value_raw=_rnd(paired_test(route_means[:, 0]), 6),
         )
     else:
-        out.update(dDS=None, dRC=None, dIS=None, worst_dDS=None, dDS_ci95=None, dRC_ci95=None)
+        out.update(dDS=None, dRC=None, dIS=None, worst_dDS=None, dDS_ci95=None, dRC_ci95=None,
+                   pdr_DS=None, pdr_RC=None, p_value_raw=None)
     out.update(
         RD=block["RD"], TO=block["TO"], n=block["n"], n_routes=len(routes),
         baseline_done_variant_failed=len(failed),
         n_pairs=int(sum(len(d) for d in deltas)),
+        flips={"lost": lost, "gained": gained},
     )
+    return out
+
+
+def relative_drop(base_mean: float, delta_mean: float) -> float | None:
+    """1 - M_variant / M_baseline from the baseline mean and the mean paired delta (None when
+    the baseline mean is 0)."""
+    if base_mean == 0:
+        return None
+    return _rnd(-delta_mean / base_mean)
+
+
+def paired_test(route_deltas: np.ndarray) -> float:
+    """Two-sided p-value of a Wilcoxon signed-rank test of ``route_deltas`` ((R,), one mean
+    delta per route) against 0; zero deltas are dropped, and 1.0 when none is left."""
+    from scipy.stats import wilcoxon
+
+    d = np.asarray(route_deltas, dtype=float)
+    d = d[d != 0.0]
+    if len(d) == 0:
+        return 1.0
+    return float(wilcoxon(d, zero_method="wilcox", alternative="two-sided").pvalue)
+
+
+def holm(p_values: Sequence[float | None]) -> list[float | None]:
+    """Holm-Bonferroni adjusted p-values (None stays None): the i-th smallest of m p-values is
+    multiplied by m - i (i from 0), then made monotone and capped at 1."""
+    known = sorted((p, i) for i, p in enumerate(p_values) if p is not None)
+    m = len(known)
+    out: list[float | None] = [None] * len(p_values)
+    running = 0.0
+    for rank, (p, i) in enumerate(known):
+        running = max(running, min(1.0, (m - rank) * p))
+        out[i] = running
     return out
 
 
@@ -148,14 +200,12 @@ def summarize(records: Iterable[EpisodeRecord], *, suite: str, seed: int, k: int
         mine = [r for r in recs if r.agent == agent and r.status != "crashed"]
         base_recs = [r for r in mine if r.family == BASELINE]
         base = {(r.route_id, r.seed): r for r in base_recs if r.k == 0}
-        agents[agent] = {
-            "baseline": _absolute(base_recs),
-            "families": {
-                f: _family_block([r for r in mine if r.family == f], base,
-                                 n_boot=n_boot, boot_seed=boot_seed)
-                for f in fams
-            },
-        }
+        blocks = {f: _family_block([r for r in mine if r.family == f], base, n_boot=n_boot,
+                                   boot_seed=boot_seed) for f in fams}
+        adjusted = holm([blocks[f]["p_value_raw"] for f in fams])
+        for f, p in zip(fams, adjusted):
+            blocks[f]["p_value"] = _rnd(p, 6)
+        agents[agent] = {"baseline": _absolute(base_recs), "families": blocks}
     return {
         "suite": str(suite),
         "seed": int(seed),

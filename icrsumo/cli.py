@@ -29,7 +29,7 @@ def _cmd_convert_routes(args: argparse.Namespace) -> int:
         workers=args.workers,
     )
     t0 = time.perf_counter()
-    report = convert_routes(routes, Path(args.out), opts)
+    report = convert_routes(routes, Path(args.out), opts, refuse_empty=True)
     dt = time.perf_counter() - t0
     print(
         f"{len(report.converted)} converted, {len(report.reused)} reused, "
@@ -65,7 +65,7 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     opts = GenerateOptions(families=families, k=args.k, seed=args.seed, templates=args.templates,
                            workers=args.workers, llm=llm, baseline_bank=bank)
     t0 = time.perf_counter()
-    written, failures = generate(Path(args.scenarios), Path(args.out), opts)
+    written, failures = generate(Path(args.scenarios), Path(args.out), opts, refuse_empty=True)
     print(f"{len(written)} routes x (1 + {len(families)} x {args.k}) sequences, {len(failures)} failed "
           f"in {time.perf_counter() - t0:.1f} s -> {args.out}", file=sys.stderr)
     for line in failures:
@@ -84,6 +84,9 @@ def _cmd_run_episode(args: argparse.Namespace) -> int:
 
     sc = read_scenario(Path(args.scenario))
     sets = read_instruction_sets(Path(args.instructions))
+    if sets[0].route_id != sc.route_id:
+        raise InputError(args.instructions, "route_id", f"is for route {sets[0].route_id!r}, the scenario is "
+                         f"route {sc.route_id!r}", "pass the instruction file generated for this scenario")
     chosen = [s for s in sets if s.family == args.family and (s.k == args.k or args.family == "baseline")]
     if not chosen:
         have = sorted({f"{s.family}:{s.k}" for s in sets})
@@ -113,8 +116,13 @@ def _port(text: str) -> int:
     return port
 
 
-def _split_list(items: list[str] | None) -> tuple[str, ...]:
-    return tuple(x for item in items or [] for x in item.split(",") if x)
+def _split_list(items: list[str] | None, option: str = "") -> tuple[str, ...]:
+    """The comma-separated values of a repeatable option; an InputError when it was given but
+    names nothing (``--family ""``)."""
+    values = tuple(x.strip() for item in items or [] for x in item.split(",") if x.strip())
+    if items is not None and not values and option:
+        raise InputError(option, "", "is empty", f"give a value, or leave {option} out for the default")
+    return values
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
@@ -122,9 +130,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     result = evaluate(
-        suite=args.suite, agents=_split_list(args.agent) or None, families=_split_list(args.family) or None,
+        suite=args.suite, agents=_split_list(args.agent, "--agent") or None,
+        families=_split_list(args.family, "--family") or None,
         k=args.k, seed=args.seed, out=args.out, workers=args.workers, quiet=args.quiet,
-        routes=_split_list(args.routes) or None, backend=args.backend, address=args.address,
+        routes=_split_list(args.routes, "--routes") or None, backend=args.backend, address=args.address,
         traffic=args.traffic, rollout_route=args.rollout_route, agent_timeout=args.agent_timeout or None,
         batch_inference=args.batch_inference, max_batch=args.max_batch,
         inference_processes=args.inference_processes, baseline_bank=args.baseline_bank,
@@ -244,7 +253,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("scenarios", help="folder written by convert-routes (or one scenario folder)")
     g.add_argument("--out", required=True, help="output folder")
     g.add_argument("--families", nargs="+", default=["paraphrase,ambiguity,noise,misleading"],
-                   help="families, space or comma separated (default: all four)")
+                   help="families, space or comma separated: paraphrase, ambiguity, noise, misleading, "
+                   "blank, shuffled (default: the first four)")
     g.add_argument("--k", type=int, default=8, help="variants per family (default 8)")
     g.add_argument("--seed", type=int, default=2026, help="seed of all draws (default 2026)")
     g.add_argument("--templates", type=Path, help="folder with your own template banks")
@@ -289,7 +299,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="built-in name, module:Class, path/file.py:Class or remote:http://HOST:PORT "
                    "(repeatable; default bev-token)")
     v.add_argument("--family", action="append",
-                   help="paraphrase, ambiguity, noise, misleading (repeatable; default all four)")
+                   help="paraphrase, ambiguity, noise, misleading, and the controls blank, shuffled "
+                   "(repeatable; default the four)")
     v.add_argument("--k", type=int, default=8, help="variants per family (default 8)")
     v.add_argument("--seed", type=int, default=2026, help="seed of the variant draws (default 2026)")
     v.add_argument("--routes", action="append", help="only these route ids (comma separated)")

@@ -31,14 +31,12 @@ from .networks import convert_xodr, load_net
 from .resources import bundled_towns
 from .routes import read_routes
 from .routing import MatchError, plan_route
-from .scenario import MANIFEST, SCENARIO_FORMAT, read_scenario
+from .scenario import MANIFEST, SCENARIO_FORMAT, STEP_LENGTH, read_scenario
 from .traffic import TRAFFIC_LEVELS, make_traffic
 from .types import RouteSpec
 
 #: bump when the scenario output changes for the same input, to invalidate reuse
 CONVERTER_VERSION = 1
-#: simulation step length (s) written into the .sumocfg: 20 Hz, as the CARLA Leaderboard
-STEP_LENGTH = 0.05
 #: ego vehicle footprint (m), a mid-size car as CARLA's Lincoln MKZ
 EGO_LENGTH, EGO_WIDTH = 4.9, 2.1
 
@@ -301,14 +299,18 @@ def _convert_one(
         return "failed", name, f"{routes_file}: route {spec.id}: {type(err).__name__}: {err}"
 
 
-def convert_routes(routes_file: Path, out_dir: Path, opts: ConvertOptions) -> ConvertReport:
+def convert_routes(routes_file: Path, out_dir: Path, opts: ConvertOptions,
+                   refuse_empty: bool = False) -> ConvertReport:
     """Convert every route of ``routes_file`` into ``out_dir``; bad routes are reported in the
     returned report and do not stop the others. File-level problems raise InputError before
-    anything is written."""
+    anything is written. With ``refuse_empty``, a run in which no route could be converted
+    removes what it wrote into a new (or empty) ``out_dir`` and raises the first route's error."""
     opts.check()
     routes_file = Path(routes_file)
     out_dir = Path(out_dir)
     check_out_dir(out_dir)
+    fresh = not out_dir.exists()
+    empty = not fresh and not any(out_dir.iterdir())
     specs, parse_errors = read_routes(routes_file)
     net_store = out_dir / "networks"
     # a user's network is read whole (load_net: unsafe XML, not a SUMO network) before anything
@@ -357,6 +359,13 @@ def convert_routes(routes_file: Path, out_dir: Path, opts: ConvertOptions) -> Co
         (report.converted if status == "converted" else report.reused).append(name)
         index.append({"id": s.id, "town": s.town, "dir": f"scenarios/{name}"})
     report.failures = [msg for _, msg in sorted(failed)]
+    if refuse_empty and report.failures and not (report.converted or report.reused):
+        if fresh or empty:
+            for child in out_dir.iterdir():
+                shutil.rmtree(child, ignore_errors=True) if child.is_dir() else child.unlink(missing_ok=True)
+            if fresh:
+                out_dir.rmdir()
+        raise InputError.of_line(report.failures[0])
     write_atomic(out_dir / "index.json", dumps_json({
         "format": "icrsumo-index/1", "routes_file": routes_file.name,
         "scenarios": index, "failures": report.failures,

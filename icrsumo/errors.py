@@ -17,7 +17,14 @@ class InputError(Exception):
         self.fix = fix
         super().__init__(self.line())
 
+    @classmethod
+    def of_line(cls, line: str) -> InputError:
+        """The error whose :meth:`line` is ``line`` (one already formatted, e.g. by a worker)."""
+        return cls(line, "", "")
+
     def line(self) -> str:
+        if not self.problem:
+            return " ".join(self.file.split())
         where = f"{self.file}: {self.place}: " if self.place else f"{self.file}: "
         text = where + self.problem
         if self.fix:

@@ -44,7 +44,8 @@ def read_text(path: Path, what: str, fix: str = "") -> str:
         raise InputError(path, "", f"{what} is not readable (permission denied)",
                          "check the file's permissions") from None
     except OSError as err:
-        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})", fix) from None
+        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})",
+                         fix or "check the path") from None
     for bom, name in BOMS:
         if raw.startswith(bom):
             raise InputError(path, "", f"{what} is {name}-encoded, not UTF-8", "save it as UTF-8")
@@ -65,14 +66,22 @@ def _no_constants(name: str) -> Any:
     raise ValueError(f"{name} is not a JSON number")
 
 
+def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict:
+    keys = [k for k, _ in pairs]
+    dup = next((k for i, k in enumerate(keys) if k in keys[:i]), None)
+    if dup is not None:
+        raise ValueError(f"key {dup[:60]!r} appears twice in one object")
+    return dict(pairs)
+
+
 def read_json(path: Path, what: str, fix: str = "") -> Any:
-    """A user's JSON file (:func:`read_text` and strict JSON: no NaN / Infinity); InputErrors
-    name the file, the line and column of a syntax error, and ``fix``."""
+    """A user's JSON file (:func:`read_text` and strict JSON: no NaN / Infinity, no key twice in
+    one object); InputErrors name the file, the line and column of a syntax error, and ``fix``."""
     from .errors import InputError
 
     text = read_text(path, what, fix)
     try:
-        return json.loads(text, parse_constant=_no_constants)
+        return json.loads(text, parse_constant=_no_constants, object_pairs_hook=_no_duplicates)
     except RecursionError:
         raise InputError(path, "", f"{what} is nested too deeply to be read",
                          fix or "check the file") from None
@@ -80,7 +89,8 @@ def read_json(path: Path, what: str, fix: str = "") -> Any:
         raise InputError(path, f"line {err.lineno}, column {err.colno}", f"malformed JSON ({err.msg})",
                          fix or f"fix the {what}'s JSON syntax there") from None
     except ValueError as err:
-        raise InputError(path, "", f"malformed JSON ({err})", fix or "use finite numbers") from None
+        raise InputError(path, "", f"malformed JSON ({err})",
+                         fix or "use finite numbers and unique keys") from None
 
 
 def read_json_doc(path: Path, fmt: str, what: str, fix: str) -> dict:

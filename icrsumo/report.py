@@ -127,7 +127,114 @@ def tables(summary: dict) -> dict[str, str]:
     return {"md": "\n".join(md) + "\n", "csv": _csv_text(_CSV_HEADER, csv_rows), "tex": "\n".join(tex) + "\n"}
 
 
+_STATS_HEADER = ("Agent", "Family", "routes", "ΔDS", "rel. drop DS %", "rel. drop RC %", "p (Holm)",
+                 "p (raw)", "flips lost", "flips gained")
+_STATS_CSV = ("agent", "family", "n_routes", "dDS", "pdr_DS", "pdr_RC", "p_value", "p_value_raw",
+              "flips_lost", "flips_gained")
+
+
+def _p(x: float | None) -> str:
+    return "—" if x is None else ("< 0.001" if x < 0.001 else f"{x:.3f}")
+
+
+def statistics_tables(summary: dict) -> dict[str, str]:
+    """What a reviewer asks for beside Δ and its CI, per agent and family, as {"md", "csv"}: the
+    routes paired, ΔDS, the relative drops of DS and RC (%), the Wilcoxon signed-rank p-value of
+    the per-route ΔDS (Holm-corrected over the agent's families, and raw), and the flips of
+    termination between baseline and variant (pairs that lost / gained a completed route)."""
+    md = ["| " + " | ".join(_STATS_HEADER) + " |", "|" + "|".join(["---"] * 2 + ["---:"] * 8) + "|"]
+    rows = []
+    for agent, a in summary["agents"].items():
+        for fam, b in a["families"].items():
+            flips = b.get("flips") or {"lost": None, "gained": None}
+            pdr = [None if b.get(k) is None else 100.0 * b[k] for k in ("pdr_DS", "pdr_RC")]
+            md.append("| " + " | ".join([
+                agent, fam, str(b["n_routes"]), _num(b.get("dDS"), 1, True), _num(pdr[0], 1),
+                _num(pdr[1], 1), _p(b.get("p_value")), _p(b.get("p_value_raw")),
+                str(flips["lost"]), str(flips["gained"])]) + " |")
+            rows.append([agent, fam, b["n_routes"], b.get("dDS"), b.get("pdr_DS"), b.get("pdr_RC"),
+                         b.get("p_value"), b.get("p_value_raw"), flips["lost"], flips["gained"]])
+    return {"md": "\n".join(md) + "\n", "csv": _csv_text(_STATS_CSV, rows)}
+
+
+_OUTCOMES = ("followed_route", "followed_text", "other", "not_reached")
+
+
+def attribution_table(summary: dict, doc: dict, top: int = 20) -> str:
+    """Markdown: per agent and family the decisions' outcomes, compliance under a contradicting
+    text and adherence to the route; then the ``top`` templates by the flips they were active
+    at (first-divergence attribution)."""
+    md = ["| Agent | Family | followed route | followed text | other | not reached | compliance % | "
+          "adherence % |", "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for agent, a in summary["agents"].items():
+        for fam, b in [(BASELINE, a["baseline"]), *a["families"].items()]:
+            d = b.get("decisions")
+            if d is None:
+                continue
+            comp = None if b.get("compliance") is None else 100.0 * b["compliance"]
+            adh = None if b.get("adherence") is None else 100.0 * b["adherence"]
+            md.append("| " + " | ".join([agent, fam, *(str(d[o]) for o in _OUTCOMES), _num(comp, 1),
+                                         _num(adh, 1)]) + " |")
+    md += ["", f"Flips (a variant failed where its baseline completed): {len(doc['flips'])}. "
+               f"Templates and noise operations active at the decision where the ego left the route "
+               f"(top {top}):", "",
+           "| Family | Template | flips | uses | flip rate % | example |", "|---|---|---:|---:|---:|---|"]
+    for r in doc["templates"][:top]:
+        rate = None if r["flip_rate"] is None else 100.0 * r["flip_rate"]
+        example = r["example"].replace("|", "/")
+        md.append(f"| {r['family']} | {r['template']} | {r['flips']} | {r['uses']} | {_num(rate, 1)} | "
+                  f"{example} |")
+    return "\n".join(md) + "\n"
+
+
 # --------------------------------------------------------------------------- figures
+def confusion_heatmaps(summary: dict, agent: str, path: Path) -> None:
+    """One heatmap per family (baseline first) of ``agent``: instructed intent (rows) x executed
+    branch (columns), counts of reached decisions."""
+    a = summary["agents"][agent]
+    blocks = [(BASELINE, a["baseline"]), *a["families"].items()]
+    blocks = [(f, b) for f, b in blocks if b.get("confusion")]
+    if not blocks:
+        return
+    rows = sorted({t for _, b in blocks for t in b["confusion"]})
+    cols = sorted({e for _, b in blocks for c in b["confusion"].values() for e in c})
+    fig = _figure(2.6 * len(blocks) + 1.0, 0.35 * len(rows) + 2.2)
+    for i, (fam, b) in enumerate(blocks):
+        ax = fig.add_subplot(1, len(blocks), i + 1)
+        grid = [[b["confusion"].get(r, {}).get(c, 0) for c in cols] for r in rows]
+        ax.imshow(grid, cmap="Blues", aspect="auto")
+        for y, line in enumerate(grid):
+            for x, v in enumerate(line):
+                if v:
+                    ax.text(x, y, str(v), ha="center", va="center", fontsize=7)
+        ax.set_xticks(range(len(cols)), cols, rotation=45, ha="right", fontsize=7)
+        ax.set_yticks(range(len(rows)), rows if i == 0 else [""] * len(rows), fontsize=7)
+        ax.set_title(fam, fontsize=9)
+        ax.set_xlabel("executed", fontsize=7)
+    fig.suptitle(f"{agent}: instructed intent (rows) x executed branch", fontsize=9)
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def template_flip_bars(doc: dict, path: Path, top: int = 15) -> None:
+    """Bars of the ``top`` templates by flips, labelled with their flip rate."""
+    rows = doc["templates"][:top]
+    if not rows:
+        return
+    fig = _figure(7.5, 0.32 * len(rows) + 1.6)
+    ax = fig.add_subplot()
+    labels = [f"{r['family']}: {r['template']}" for r in rows][::-1]
+    ax.barh(range(len(rows)), [r["flips"] for r in rows][::-1], color="tab:red")
+    for y, r in enumerate(rows[::-1]):
+        rate = "" if r["flip_rate"] is None else f" ({100.0 * r['flip_rate']:.0f} % of {r['uses']})"
+        ax.text(r["flips"], y, f" {r['flips']}{rate}", va="center", fontsize=7)
+    ax.set_yticks(range(len(rows)), labels, fontsize=7)
+    ax.set_xlabel("flips: variant failed where the baseline completed")
+    ax.set_title("Templates active where the ego left the route", fontsize=9)
+    fig.tight_layout()
+    _save(fig, path)
+
+
 def _figure(width: float, height: float):
     import sys
 
@@ -403,9 +510,20 @@ def _file_name(s: str) -> str:
     return name if name not in ("", ".", "..") else f"x_{name}"
 
 
+def write_attribution(summary: dict, doc: dict, out_dir: Path) -> None:
+    """Write attribution.json (flips and template ranking), attribution.md,
+    figures/confusion_<agent>.png and figures/template_flips.png."""
+    out = Path(out_dir)
+    write_atomic(out / "attribution.json", dumps_json(doc))
+    write_atomic(out / "attribution.md", attribution_table(summary, doc))
+    for agent in summary["agents"]:
+        confusion_heatmaps(summary, agent, out / "figures" / f"confusion_{_file_name(agent)}.png")
+    template_flip_bars(doc, out / "figures" / "template_flips.png")
+
+
 def write_report(summary: dict, records: Sequence[EpisodeRecord], out_dir: Path,
                  logs: Any = None, nets: Any = None) -> str:
-    """Write summary.json, results.{md,csv,tex}, episodes.csv, figures/rd_to.png,
+    """Write summary.json, results.{md,csv,tex}, statistics.{md,csv}, episodes.csv, figures/rd_to.png,
     figures/delta_bars.png and leaderboard/<agent>_<family>.json (baseline included) under
     ``out_dir``; returns the Markdown table. ``logs`` and ``nets`` are accepted for the caller's
     convenience and unused: paired rollout figures are written by the caller."""
@@ -416,6 +534,9 @@ def write_report(summary: dict, records: Sequence[EpisodeRecord], out_dir: Path,
     write_atomic(out / "results.md", t["md"])
     write_atomic(out / "results.csv", t["csv"])
     write_atomic(out / "results.tex", t["tex"])
+    st = statistics_tables(summary)
+    write_atomic(out / "statistics.md", st["md"])
+    write_atomic(out / "statistics.csv", st["csv"])
     rows = episode_table(records)
     write_atomic(out / "episodes.csv", _csv_text(EPISODE_COLUMNS, ([row[c] for c in EPISODE_COLUMNS]
                                                                     for row in rows)))

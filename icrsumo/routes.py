@@ -57,7 +57,8 @@ def check_xml_file(path: Path, what: str = "XML file", fix: str = "") -> None:
     except FileNotFoundError:
         raise InputError(path, "", f"{what} not found", fix or "check the path") from None
     except OSError as err:
-        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})", fix) from None
+        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})",
+                         fix or "check the path") from None
     if not path.is_file():
         raise InputError(path, "", f"is a folder, not a {what}" if path.is_dir() else f"{what} is not a file",
                          fix or "pass the file")
@@ -74,7 +75,8 @@ def _check_xml_cached(real: str, mtime_ns: int, size: int, shown: str, what: str
         raise InputError(path, "", f"{what} is not readable (permission denied)",
                          "check the file's permissions") from None
     except OSError as err:
-        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})", fix) from None
+        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})",
+                         fix or "check the path") from None
 
 
 def _scan(fh, path: Path, real: Path, what: str, fix: str) -> None:
@@ -133,7 +135,8 @@ def parse_xml_file(path: Path, expected_root: str | None = None, what: str = "ro
     try:
         root = safe_parse(str(path), forbid_dtd=True).getroot()
     except OSError as err:
-        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})", fix) from None
+        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})",
+                         fix or "check the path") from None
     except ParseError as err:
         line, col = err.position
         raise InputError(

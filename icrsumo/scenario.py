@@ -18,6 +18,8 @@ from .fsio import read_json_doc
 from .routes import check_xml_file, parse_xml_file
 
 SCENARIO_FORMAT = "icrsumo-scenario/1"
+#: simulation step length (s) written into the .sumocfg: 20 Hz, as the CARLA Leaderboard
+STEP_LENGTH = 0.05
 INDEX_FORMAT = "icrsumo-index/1"
 MANIFEST = "scenario.json"
 _FIX = "run icrsumo convert-routes again"
@@ -232,9 +234,48 @@ SUMOCFG_OPTIONS = SUMOCFG_SECTIONS | {
     "duration-log.disable", "no-warnings"}
 
 
-def _check_sumocfg(cfg: Path, shown: Path) -> None:
-    """The SUMO config parses (safely) and every input file it names exists and is safe XML:
-    ``sumo -c`` reads them all."""
+#: elements a scenario's route files may hold (what convert-routes writes, and SUMO's plain
+#: demand elements); anything else (an output such as <edgeData>, an additional) is refused
+ROUTE_ELEMENTS = frozenset({"routes", "vType", "route", "vehicle", "trip", "flow", "person", "walk",
+                            "personTrip", "ride", "stop", "param"})
+_TRUE_FALSE = ("true", "false")
+
+
+def _check_option(shown: Path, tag: str, value: str, step_length: float) -> None:
+    """The value of one option of a scenario's .sumocfg (those that are not files)."""
+    place = f"<{tag} value={short(value)}>"
+
+    def number(lo: float, hi: float) -> float:
+        try:
+            x = float(value)
+        except ValueError:
+            raise InputError(shown, place, "is not a number", _FIX) from None
+        if not (math.isfinite(x) and lo <= x <= hi):
+            raise InputError(shown, place, f"is not in [{lo:g}, {hi:g}]", _FIX)
+        return x
+
+    if tag in ("begin", "end"):
+        number(0.0, 1e7)
+    elif tag == "step-length":
+        if abs(number(0.0, 1.0) - step_length) > 1e-9:
+            raise InputError(shown, place, f"differs from the manifest's step_length {step_length:g} s",
+                             _FIX)
+    elif tag in ("collision.mingap-factor", "time-to-teleport"):
+        number(-1.0, 1e7)
+    elif tag == "seed":
+        if not value.isdigit() or int(value) > 2**31 - 1:
+            raise InputError(shown, place, "is not a seed (0 to 2**31 - 1)", _FIX)
+    elif tag == "collision.action":
+        if value != "warn":
+            raise InputError(shown, place, "must be warn (icrsumo detects collisions itself)", _FIX)
+    elif value not in _TRUE_FALSE:
+        raise InputError(shown, place, "must be true or false", _FIX)
+
+
+def _check_sumocfg(cfg: Path, shown: Path, net: Path, step_length: float) -> None:
+    """The SUMO config parses (safely), sets only the options convert-routes writes, with sane
+    values, runs the manifest's network, and every route file it names exists and holds only
+    demand elements: ``sumo -c`` reads them all."""
     root = parse_xml_file(cfg, expected_root="configuration", what="SUMO config",
                           fix="use the scenario.sumocfg written by icrsumo convert-routes")
     for el in root.iter():
@@ -243,17 +284,31 @@ def _check_sumocfg(cfg: Path, shown: Path) -> None:
             raise InputError(shown, f"<{tag}>", "is not an option a scenario may set (SUMO reads its config "
                              "as given, outputs and logs included)",
                              f"keep to {', '.join(sorted(SUMOCFG_OPTIONS - SUMOCFG_SECTIONS))}")
-        if not tag.endswith(("-file", "-files")):
+        if tag in SUMOCFG_SECTIONS:
             continue
         value = el.get("value")
         if value is None:
             raise InputError(shown, f"<{tag}>", "has no value attribute", _FIX)
-        for name in filter(None, (v.strip() for v in value.split(","))):
+        if not tag.endswith(("-file", "-files")):
+            _check_option(shown, tag, value, step_length)
+            continue
+        names = [v.strip() for v in value.split(",") if v.strip()]
+        if tag == "net-file" and [(cfg.parent / n).resolve() for n in names] != [net.resolve()]:
+            raise InputError(shown, f"<{tag}>", f"names {short(value)}, not the manifest's network "
+                             f"{net.name}", _FIX)
+        for name in names:
             path = (cfg.parent / name).resolve()
             if not path.is_file():
                 raise InputError(shown, f"<{tag}>", f"names {short(name)}, which does not exist",
                                  f"{_FIX}, or restore the file")
-            check_xml_file(path, "network file" if tag == "net-file" else "SUMO input file", _FIX)
+            if tag == "net-file":
+                check_xml_file(path, "network file", _FIX)
+                continue
+            routes = parse_xml_file(path, expected_root="routes", what="SUMO route file", fix=_FIX)
+            bad = next((e.tag for e in routes.iter() if e.tag not in ROUTE_ELEMENTS), None)
+            if bad is not None:
+                raise InputError(path, f"<{bad[:40]}>", "is not a demand element a scenario may hold",
+                                 f"keep to {', '.join(sorted(ROUTE_ELEMENTS))}")
 
 
 def read_scenario(path: Path) -> Scenario:
@@ -268,7 +323,7 @@ def read_scenario(path: Path) -> Scenario:
     net = _rel_file(c, base, c.key(m, "net"), "net", "network")
     check_xml_file(net, "network file", _FIX)
     sumocfg = _rel_file(c, base, c.key(m, "sumocfg"), "sumocfg", "SUMO config")
-    _check_sumocfg(sumocfg, sumocfg)
+    _check_sumocfg(sumocfg, sumocfg, net, float(m.get("step_length", STEP_LENGTH)))
     ego, st = m["ego"], m["ego"]["start"]
     return Scenario(
         route_id=m["route_id"], town=m["town"], dir=base, net=net, sumocfg=sumocfg,

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import sqlite3
 import zlib
 from collections.abc import Iterator
@@ -16,7 +17,7 @@ from dataclasses import asdict, fields
 from pathlib import Path
 
 from .errors import InputError
-from .types import EpisodeRecord
+from .types import EpisodeLog, EpisodeRecord
 from .vocab import EpisodeStatus, EventKind, Family, Termination, TerminationClass
 
 _COLUMNS = [f.name for f in fields(EpisodeRecord)]
@@ -49,6 +50,10 @@ class ResultStore:
                 bad = [r[0] for r in self._db.execute("PRAGMA quick_check")]
                 if bad != ["ok"]:
                     raise sqlite3.DatabaseError(bad[0])
+                tables = {r[0] for r in self._db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+                if tables and "episodes" not in tables:
+                    shown = ", ".join(sorted(tables))[:80]
+                    raise sqlite3.DatabaseError(f"no episodes table (tables: {shown})")
             self._db.executescript(_SCHEMA)
             self._db.commit()
 
@@ -123,8 +128,8 @@ class ResultStore:
             d = dict(zip(_COLUMNS, r))
             try:
                 for c in ("ds", "rc", "is_", "length", "duration", "k", "seed", "attempts"):
-                    if d[c] is not None and (not isinstance(d[c], (int, float)) or d[c] != d[c]):
-                        raise TypeError(f"{c} is {d[c]!r}, not a number")
+                    if d[c] is not None and (not isinstance(d[c], (int, float)) or not math.isfinite(d[c])):
+                        raise TypeError(f"{c} is {d[c]!r}, not a finite number")
                 raw = json.loads(d["infractions"] or "[]")
                 d["infractions"] = tuple((EventKind(k), float(f)) for k, f in raw)
                 d["status"], d["family"] = EpisodeStatus(d["status"]), Family(d["family"])
@@ -137,6 +142,22 @@ class ResultStore:
                                  "the store is damaged: move it away and rerun the evaluation") from None
             out.append(EpisodeRecord(**d))
         return out
+
+    def episode_log(self, agent: str, route_id: str, family: str, k: int, seed: int) -> EpisodeLog | None:
+        """The stored episode log of one episode, parsed (None when there is none); a damaged
+        one is an InputError naming the store and the episode."""
+        from .logs import loads_log
+
+        text = self.log(agent, route_id, family, k, seed)
+        if text is None:
+            return None
+        try:
+            return loads_log(text)
+        except (InputError, ValueError, TypeError, KeyError, RecursionError) as err:
+            why = err.problem if isinstance(err, InputError) else f"{type(err).__name__}: {err}"
+            raise InputError(self.path, f"episode {agent}/{route_id}/{family}/{k}/{seed}",
+                             f"its stored log is damaged ({' '.join(str(why).split())[:160]})",
+                             "delete that row (or move the store away) and rerun") from None
 
     def log(self, agent: str, route_id: str, family: str, k: int, seed: int) -> str | None:
         """The stored episode log (JSON text) of one episode, if any."""

@@ -66,18 +66,32 @@ TERMINATION_CLASS: dict[Termination, TerminationClass] = {
 
 
 class Family(StrEnum):
-    """An instruction sequence's family: the baseline or one of ICR-Drive's four
-    counterfactual families."""
+    """An instruction sequence's family: the baseline, one of ICR-Drive's four counterfactual
+    families, or a control family (does the agent use language at all?): ``blank`` (no
+    instruction text) and ``shuffled`` (each instruction replaced by a baseline instruction of
+    another maneuver)."""
 
     BASELINE = "baseline"
     PARAPHRASE = "paraphrase"
     AMBIGUITY = "ambiguity"
     NOISE = "noise"
     MISLEADING = "misleading"
+    BLANK = "blank"
+    SHUFFLED = "shuffled"
 
 
-#: the four counterfactual families, in the paper's order
+#: the four counterfactual families, in the paper's order (the default selection)
 FAMILIES: tuple[Family, ...] = (Family.PARAPHRASE, Family.AMBIGUITY, Family.NOISE, Family.MISLEADING)
+#: the control families, selectable like the four
+CONTROL_FAMILIES: tuple[Family, ...] = (Family.BLANK, Family.SHUFFLED)
+#: every counterfactual family, in their canonical order (the paper's four, then the controls)
+ALL_FAMILIES: tuple[Family, ...] = FAMILIES + CONTROL_FAMILIES
+
+
+def variants_of(family: str, k: int) -> int:
+    """How many variants of ``family`` a K-variant protocol runs: ``blank`` has one (its K
+    variants would be the same sequence), every other family K."""
+    return 1 if family == Family.BLANK else k
 
 
 class Intent(StrEnum):
@@ -91,6 +105,18 @@ class Intent(StrEnum):
     LANE_RIGHT = "lane_right"
     STOP = "stop"
     UNKNOWN = "unknown"
+
+
+class DecisionOutcome(StrEnum):
+    """What the ego did at one decision point of its route (a junction where the route has a
+    choice, or a lane change it requires): ``followed_route``; ``followed_text`` (the text and
+    the route disagree and the ego did what the text said); ``other`` (left the route some other
+    way); ``not_reached`` (the episode ended before)."""
+
+    FOLLOWED_ROUTE = "followed_route"
+    FOLLOWED_TEXT = "followed_text"
+    OTHER = "other"
+    NOT_REACHED = "not_reached"
 
 
 class EpisodeStatus(StrEnum):

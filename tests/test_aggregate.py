@@ -148,3 +148,48 @@ def test_episode_table_rows():
     row = episode_table([r])[0]
     assert row["infractions"] == "collision_vehicle:0.6;red_light:0.7" and row["n_infractions"] == 2
     assert row["is"] == 0.42 and row["termination"] == "route_deviation"
+
+
+def test_reviewer_statistics_by_hand():
+    s = summarize(tiny(), suite="tiny", seed=7, k=2, families=FAMS, n_boot=200)
+    p = s["agents"]["A"]["families"]["paraphrase"]
+    # paired baseline means: DS (80+80+60+60+50+50)/6, RC (100+100+60+60+100+100)/6
+    assert p["pdr_DS"] == round(13.3333333 / 63.3333333, 4)
+    assert p["pdr_RC"] == round(13.3333333 / 86.6666667, 4)
+    assert p["flips"] == {"lost": 1, "gained": 0}  # r1 k1: done -> RD; r2 was TO on both sides
+    # per-route mean dDS: r1 -25, r2 -15, r3 0 (dropped): exact two-sided Wilcoxon, n = 2 -> 0.5
+    assert (p["p_value_raw"], p["p_value"]) == (0.5, 0.5)
+    m = s["agents"]["B"]["families"]["misleading"]
+    assert m["pdr_DS"] == round(41.6666667 / 93.3333333, 4)  # pairs r1k0, r3k0, r3k1
+    assert m["flips"] == {"lost": 2, "gained": 0}
+    # an agent without a family's episodes has no test there, and Holm skips it
+    assert s["agents"]["A"]["families"]["misleading"]["p_value"] is None
+
+
+def test_a_family_that_changes_nothing_has_p_one_and_no_flips():
+    recs = [rec("oracle", f"r{i}", fam, k, 90, 100, 0.9) for i in range(12)
+            for fam, k in [("baseline", 0), ("misleading", 0), ("misleading", 1)]]
+    b = summarize(recs, suite="x", seed=7, k=2, families=("misleading",), n_boot=100)["agents"]["oracle"]
+    m = b["families"]["misleading"]
+    assert (m["p_value"], m["pdr_DS"], m["flips"]) == (1.0, 0.0, {"lost": 0, "gained": 0})
+
+
+def test_a_consistent_drop_is_significant_and_gains_are_counted():
+    recs = []
+    for i in range(12):
+        recs.append(rec("A", f"r{i}", "baseline", 0, 90, 100, 0.9, "done" if i else "RD"))
+        recs.append(rec("A", f"r{i}", "misleading", 0, 40 + i, 50, 0.9, "RD" if i else "done"))
+        recs.append(rec("A", f"r{i}", "noise", 0, 90 - (i % 2), 100, 0.9))
+    fams = ("noise", "misleading")
+    s = summarize(recs, suite="x", seed=7, k=1, families=fams, n_boot=100)["agents"]["A"]["families"]
+    assert s["misleading"]["p_value_raw"] < 0.001 and s["misleading"]["flips"] == {"lost": 11, "gained": 1}
+    assert s["noise"]["p_value_raw"] > 0.01
+    assert list(fams) == list(s)
+
+
+def test_holm_bonferroni():
+    from icrsumo.aggregate import holm
+
+    assert holm([0.01, 0.04, 0.03]) == pytest.approx([0.03, 0.06, 0.06])
+    assert holm([0.5, None, 0.9]) == [1.0, None, 1.0]  # 2 x 0.5, then max(1.0, 1 x 0.9)
+    assert holm([]) == []

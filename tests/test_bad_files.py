@@ -9,6 +9,7 @@ instruction files, scenario manifests and index.json, episode logs, the --baseli
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -145,8 +146,7 @@ def test_convert_with_hostile_net_dir_town_copies_no_net(tmp_path, capsys):
                  str(nets), "--traffic", "none"])
     err = capsys.readouterr().err
     assert code == 2 and f"Evil.net.xml: line 3: network file {BAN}" in err
-    assert not any((out / "networks").iterdir())
-    assert not any((out / "scenarios").iterdir())
+    assert not out.exists()  # no route converted: nothing written, no net copied
 
 
 def test_convert_with_hostile_xodr_or_route_file_writes_nothing(tmp_path, capsys):
@@ -463,11 +463,34 @@ def test_scenario_sumo_files_missing_or_hostile(converted_one, tmp_path, capsys)
     cfg.write_text(_after_decl(good, COMMENT_20K + DTD.replace("net", "configuration")))
     with pytest.raises(InputError, match=f"scenario.sumocfg: line 3: SUMO config {BAN}"):
         read_scenario(sc)
+    for before, after, expect in [
+        ('<step-length value="0.05"/>', '<step-length value="fast"/>',
+         "<step-length value='fast'>: is not a number"),
+        ('<step-length value="0.05"/>', '<step-length value="0.1"/>',
+         "differs from the manifest's step_length"),
+        ('<begin value="0"/>', '<begin value="1e9"/>', "is not in [0, 1e+07]"),
+        ('<collision.action value="warn"/>', '<collision.action value="remove"/>', "must be warn"),
+        ('<no-warnings value="true"/>', '<no-warnings value="yes"/>', "must be true or false"),
+        ('.net.xml"/>', '.net.xml,other.net.xml"/>', "not the manifest's network"),
+    ]:
+        assert before in good, before
+        cfg.write_text(good.replace(before, after))
+        with pytest.raises(InputError, match=re.escape(expect)):
+            read_scenario(sc)
     cfg.write_text(good)
+    veh = sc / "ego.rou.xml"
+    veh_text = veh.read_text()
+    veh.write_text(veh_text.replace("</routes>", '<edgeData id="d" file="/tmp/x.xml"/></routes>'))
+    with pytest.raises(InputError, match=r"ego.rou.xml: <edgeData>: is not a demand element"):
+        read_scenario(sc)
+    veh.write_text(veh_text[: len(veh_text) // 2])
+    with pytest.raises(InputError, match=r"ego.rou.xml: line \d+, column \d+: malformed XML"):
+        read_scenario(sc)
+    veh.write_text(veh_text)
     ego = sc / "ego.rou.xml"
     ego_text = ego.read_text()
     ego.write_text(_after_decl(ego.read_text(), COMMENT_20K + DTD.replace("net", "routes")))
-    with pytest.raises(InputError, match=f"ego.rou.xml: line 3: SUMO input file {BAN}"):
+    with pytest.raises(InputError, match=f"ego.rou.xml: line 3: SUMO route file {BAN}"):
         read_scenario(sc)
     net = sc.parent.parent / "networks" / "icr_arterial.net.xml"
     ego.write_text(ego_text)

@@ -25,6 +25,9 @@ cmd=${1:?pack | stage | install | env}
 case "$cmd" in
   pack)
     dir=$(realpath -m "${2:?DIR}"); py=${3:-3.12}; tag=${py/./}
+    # this venv's python by an absolute path (the steps below change folder; PATH may be relative)
+    py3=$(command -v python3); py3="$(cd "$(dirname "$py3")" && pwd)/$(basename "$py3")"
+    python3() { "$py3" "$@"; }
     mkdir -p "$dir/part-1" "$dir/part-2" "$dir/wheels"
     opts=(--no-deps --only-binary=:all: --python-version "$py" --implementation cp
           --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64

@@ -12,7 +12,7 @@ from ..devices import check_device
 from ..errors import InputError, check_seed
 from ..fsio import check_out_dir
 from ..instructions.baseline_bank import load_baseline_bank
-from ..instructions.families import FAMILIES
+from ..instructions.families import ALL_FAMILIES, FAMILIES
 from ..resources import bundled_suites
 from ..traffic import TRAFFIC_LEVELS
 
@@ -58,10 +58,10 @@ class EvalOptions:
 
     def check(self) -> None:
         """InputErrors for bad values (agent specs are checked when they are resolved)."""
-        bad = [f for f in self.families if f not in FAMILIES]
+        bad = [f for f in self.families if f not in ALL_FAMILIES]
         if bad or not self.families:
             raise InputError("--family", bad[0] if bad else "", "unknown family",
-                             f"use {', '.join(FAMILIES)}")
+                             f"use {', '.join(ALL_FAMILIES)}")
         if self.backend not in BACKENDS:
             raise InputError("--backend", self.backend, "unknown backend", "use local or ray")
         if not 1 <= self.k <= 64:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..convert import safe_name
 from ..errors import InputError
-from ..instructions.families import FAMILIES
+from ..instructions.families import ALL_FAMILIES
 from ..scenario import find_scenarios, read_scenario
 from ..store import ResultStore
 from ..types import EpisodeRecord
@@ -22,15 +22,18 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     not of this evaluation (other agents, routes, families or k), counted in the summary
     (``episodes.stored_not_in_report``) and named on stderr, never dropped silently."""
     from ..aggregate import summarize
-    from ..report import write_report
+    from ..attribution import attach
+    from ..report import write_attribution, write_report
 
-    families = tuple(f for f in FAMILIES if f in opts.families)  # canonical order
+    families = tuple(f for f in ALL_FAMILIES if f in opts.families)  # canonical order
     summary = summarize(records, suite=opts.suite, seed=opts.seed, k=opts.k, families=families)
+    attribution = attach(summary, records, episode_decisions(store, records, instr_dir))
     if not_shown:
         summary["episodes"]["stored_not_in_report"] = not_shown
         print(f"icrsumo: note: {not_shown} stored episodes of other agents, routes, families or k are "
               f"not in this report (icrsumo report {out} shows all)", file=sys.stderr)
     table = write_report(summary, records, out)
+    write_attribution(summary, attribution, out)
     try:
         rollout_figure(opts, out, store, records, scenarios, instr_dir)
     except InputError as err:  # the figure is optional; the numbers are all in the tables
@@ -40,12 +43,51 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     return summary
 
 
+def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_dir: Path) -> dict:
+    """Key -> the decisions (:func:`icrsumo.decisions.classify_decisions`) of every finished
+    episode in ``records``, from its stored log and its route's instruction file; a route whose
+    instruction file cannot be read, or an episode whose stored log is damaged, is left out and
+    named on stderr."""
+    from ..decisions import classify_decisions
+    from ..instructions.store import read_instruction_sets, read_maneuvers
+
+    routes: dict[str, tuple | None] = {}
+    out = {}
+    damaged: list[str] = []
+    for r in records:
+        if r.status != "done":
+            continue
+        if r.route_id not in routes:
+            path = instr_dir / f"{safe_name(r.route_id)}.json"
+            try:
+                sets = {(s.family, s.k): s for s in read_instruction_sets(path)}
+                routes[r.route_id] = (read_maneuvers(path), sets)
+            except InputError as err:
+                routes[r.route_id] = None
+                print(f"icrsumo: note: no decision attribution for route {r.route_id}: {err.line()}",
+                      file=sys.stderr)
+        route = routes[r.route_id]
+        if route is None or (r.family, r.k) not in route[1]:
+            continue
+        try:
+            log = store.episode_log(r.agent, r.route_id, r.family, r.k, r.seed)
+        except InputError as err:  # the numbers are in the tables; only its decisions are missing
+            damaged.append(err.line())
+            continue
+        if log is not None:
+            out[(r.agent, r.route_id, str(r.family), r.k, r.seed)] = classify_decisions(
+                route[0], route[1][(r.family, r.k)], log)
+    if damaged:
+        print(f"icrsumo: note: {len(damaged)} stored episode logs cannot be read, so their decisions are "
+              f"not in the attribution (first: {damaged[0]})", file=sys.stderr)
+    return out
+
+
 def rollout_figure(opts: EvalOptions, out: Path, store: ResultStore, records: list[EpisodeRecord],
                    scenarios: Path, instr_dir: Path) -> None:
     """Paired rollout figure: baseline vs k = 0 of each family for one route and agent
     (``opts.rollout_route``, default the first with a finished baseline)."""
     from ..instructions.store import read_instruction_sets
-    from ..logs import loads_log
     from ..networks import load_net
     from ..report import paired_rollout
 
@@ -54,20 +96,20 @@ def rollout_figure(opts: EvalOptions, out: Path, store: ResultStore, records: li
         return
     route = opts.rollout_route or done[0].route_id
     agent = done[0].agent
-    base_json = store.log(agent, route, "baseline", 0, opts.seed)
-    if base_json is None:
+    base_log = store.episode_log(agent, route, "baseline", 0, opts.seed)
+    if base_log is None:
         return
     sets = {(s.family, s.k): s for s in read_instruction_sets(instr_dir / f"{safe_name(route)}.json")}
     variants = []
     for fam in opts.families:
-        lj = store.log(agent, route, fam, 0, opts.seed)
-        if lj is not None and (fam, 0) in sets:
-            variants.append((f"{fam} k=0", loads_log(lj), sets[(fam, 0)].instructions[0].rendered()))
+        log = store.episode_log(agent, route, fam, 0, opts.seed)
+        if log is not None and (fam, 0) in sets:
+            variants.append((f"{fam} k=0", log, sets[(fam, 0)].instructions[0].rendered()))
     sc_dir = next((d for d in find_scenarios(scenarios) if read_scenario(d).route_id == route), None)
     if sc_dir is None:
         return
     net = load_net(read_scenario(sc_dir).net)
     fig = out / "figures" / f"rollout_{safe_name(route)}.png"
     fig.parent.mkdir(parents=True, exist_ok=True)
-    paired_rollout(net, loads_log(base_json), variants, sets[("baseline", 0)].instructions[0].rendered(),
+    paired_rollout(net, base_log, variants, sets[("baseline", 0)].instructions[0].rendered(),
                    fig, title=f"{agent} on {route}")

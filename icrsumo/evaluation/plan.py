@@ -18,6 +18,7 @@ from ..instructions.families import FAMILIES
 from ..instructions.generate import GenerateOptions, generate
 from ..resources import bundled_suites, suite_coords
 from ..scenario import find_scenarios, read_scenario
+from ..vocab import CONTROL_FAMILIES, variants_of
 from .options import EvalOptions
 
 
@@ -96,7 +97,8 @@ def prepare_suite(opts: EvalOptions) -> PreparedSuite:
     """Check the out folder's configuration, convert the suite into OUT/scenarios (a
     convert-routes folder is used as it is), generate the instructions of every family into
     OUT/instructions (both reused when present), check ``--routes`` and ``--rollout-route``
-    against the suite, and only then write OUT/config.json. Skipped routes are named on stderr.
+    against the suite, and only then write OUT/config.json. Skipped routes are returned
+    (``skipped``: one line each) for the caller to name.
     When anything is refused, an out folder this call created is removed again: a refused run
     leaves nothing behind (and never a config.json that locks the folder)."""
     out = Path(opts.out)
@@ -106,17 +108,15 @@ def prepare_suite(opts: EvalOptions) -> PreparedSuite:
     empty = not fresh and out.is_dir() and not any(out.iterdir())
     try:
         scenarios, skipped = _resolve_suite(opts, out)
-        for line in skipped:
-            print(f"icrsumo: skipped: {line}", file=sys.stderr)
         instr_dir = out / "instructions"
         if bank is not None and bank.note():
             print(bank.note(), file=sys.stderr)
         written, failures = generate(scenarios, instr_dir, GenerateOptions(
-            families=FAMILIES, k=opts.k, seed=opts.seed, workers=1, baseline_bank=bank))
-        for line in failures:
-            print(f"icrsumo: skipped: {line}", file=sys.stderr)
+            families=FAMILIES + tuple(f for f in CONTROL_FAMILIES if f in opts.families), k=opts.k,
+            seed=opts.seed, workers=1, baseline_bank=bank))
         if not written and not (out / "results.sqlite").exists():  # (with a store: run checks it)
-            raise no_routes(opts)
+            lines = list(skipped) + list(failures)
+            raise InputError.of_line(lines[0]) if lines else no_routes(opts)
         check_route_ids(opts, written)
         out.mkdir(parents=True, exist_ok=True)
         write_atomic(out / "config.json", dumps_json(config))
@@ -163,7 +163,7 @@ def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mappin
     if opts.routes:
         check_route_ids(opts, [sc.route_id for _, sc in scs])
         scs = [(d, sc) for d, sc in scs if sc.route_id in set(opts.routes)]
-    sets = [("baseline", 0)] + [(f, k) for f in opts.families for k in range(opts.k)]
+    sets = [("baseline", 0)] + [(f, k) for f in opts.families for k in range(variants_of(f, opts.k))]
     jobs = []
     for spec in opts.agents:
         for d, sc in scs:

@@ -5,14 +5,15 @@ imported here, once), prepare the suite, plan the jobs, run those not stored yet
 from __future__ import annotations
 
 import re
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ..agents.registry import DEFAULT_AGENT, agent_factory, agent_name
-from ..errors import InputError, expect
+from ..errors import InputError, check_seed, expect
 from ..fsio import read_json
-from ..instructions.families import FAMILIES
+from ..instructions.families import ALL_FAMILIES, FAMILIES
 from ..store import ResultStore
 from ..types import EpisodeRecord
 from ..vocab import EpisodeStatus, ErrorKind, OutcomeStatus
@@ -67,6 +68,8 @@ def run_evaluation(opts: EvalOptions) -> EvalResult:
     jobs = [j for j in plan_jobs(opts, prep.scenarios, prep.instructions, names) if j.route_id in written]
     with ResultStore(out / "results.sqlite") as store:
         check_stored_routes(opts, store, set(names.values()), written, prep.skipped)
+        for line in prep.skipped:
+            print(f"icrsumo: skipped: {line}", file=sys.stderr)
         if not written:
             raise no_routes(opts)
         have = store.keys(EpisodeStatus.DONE if opts.retry_crashed else None)
@@ -142,9 +145,12 @@ def report_only(out: Path, quiet: bool = False) -> dict:
     expect(cfg, dict, cfg_path, "", "the configuration", fix)
     for key, kind in (("suite", str), ("k", int), ("seed", int)):
         expect(cfg.get(key), kind, cfg_path, key, key, fix)
+    if not 1 <= cfg["k"] <= 64:
+        raise InputError(cfg_path, "k", f"{cfg['k']} is out of range (1 to 64)", fix)
+    check_seed(cfg["seed"], f"{cfg_path}: seed")
     with ResultStore(out / "results.sqlite") as store:
         records = store.records()
-        families = tuple(f for f in FAMILIES if any(r.family == f for r in records))
+        families = tuple(f for f in ALL_FAMILIES if any(r.family == f for r in records))
         agents = tuple(sorted({r.agent for r in records}))
         opts = EvalOptions(out=out, suite=cfg["suite"], agents=agents or (DEFAULT_AGENT,),
                            families=families or FAMILIES, k=int(cfg["k"]), seed=int(cfg["seed"]),

@@ -185,6 +185,23 @@ def _load_baseline(folder: Path) -> dict[str, tuple[str, ...]]:
     return out
 
 
+def baseline_catalogue(banks: Banks) -> tuple[tuple[str, str, Intent], ...]:
+    """Every concrete baseline instruction of ``banks``: (template id, text, intent) for each
+    maneuver type (notices and the start excluded), each phrasing and each slot value
+    (left / right, the roundabout's ordinals), in the bank's order; ``[x]`` stays. The pool of
+    the ``shuffled`` control family."""
+    out = []
+    for tname, rule in BASELINE_TYPES.items():
+        if rule == "stop" or tname == "start" or tname not in banks.baseline:
+            continue
+        for i, phrasing in enumerate(banks.baseline[tname]):
+            for fills in _fills(set(_SLOT.findall(rule))):
+                intent = _exit_intent(fills["exit"]) if "exit" in fills else Intent(fill(rule, **fills))
+                tid = ":".join([tname, str(i), *fills.values()])
+                out.append((tid, fill(phrasing, **fills), intent))
+    return tuple(out)
+
+
 def _exit_intent(ordinal: str) -> Intent:
     from .maneuvers import roundabout_intent
 

@@ -14,6 +14,17 @@ For each instruction of the baseline sequence, with its baseline intent τ:
 
 Instructions whose τ has no bank (stop, unknown) keep their text. Variant k of a family is the
 whole sequence with the k-th draw for every instruction: same ids, triggers and distances.
+
+The control families (does the agent use language at all?):
+
+- Blank: every instruction's text is empty (one variant: K of them would be the same
+  sequence); notices are kept.
+- Shuffled: K concrete baseline instructions (:func:`~icrsumo.instructions.banks.baseline_catalogue`)
+  whose intent is not τ, with ``[x]`` when the baseline text has it, drawn without
+  replacement; the route is unchanged, so the text now names another maneuver.
+
+The controls come after the four in the Generator's order, so selecting them leaves the
+paper's four families' draws unchanged.
 """
 
 from __future__ import annotations
@@ -22,12 +33,12 @@ import numpy as np
 
 from ..errors import InputError
 from ..types import Instruction, InstructionSet, Intent
-from ..vocab import FAMILIES
-from .banks import CONTRADICTS, Banks, Entry, fill
+from ..vocab import ALL_FAMILIES, FAMILIES, Family, variants_of
+from .banks import CONTRADICTS, Banks, Entry, baseline_catalogue, fill
 from .intent import classify_intent
 from .noise import apply_ops
 
-__all__ = ["FAMILIES", "make_variants"]
+__all__ = ["ALL_FAMILIES", "FAMILIES", "make_variants"]
 
 NOISE_TRIES = 25
 
@@ -85,18 +96,39 @@ def _noise_variants(instr: Instruction, banks: Banks, k: int,
     return out
 
 
+def _shuffled_variants(instr: Instruction, banks: Banks, k: int,
+                       rng: np.random.Generator) -> list[tuple[str, str]]:
+    """(text, template id) for the K ``shuffled`` variants of one instruction."""
+    tau = instr.intent
+    if tau in (Intent.STOP, Intent.UNKNOWN):
+        return [(instr.text, "keep")] * k
+    has_x = "[x]" in instr.text
+    pool = [(tid, text) for tid, text, intent in baseline_catalogue(banks)
+            if intent != tau and ("[x]" in text) == has_x]
+    return [(pool[i][1], pool[i][0]) for i in _draw(rng, len(pool), k, f"{banks.folder}/baseline.json")]
+
+
+def _family_variants(family: str, instr: Instruction, banks: Banks, k: int,
+                     rng: np.random.Generator) -> list[tuple[str, str]]:
+    if family == Family.NOISE:
+        return _noise_variants(instr, banks, k, rng)
+    if family == Family.BLANK:
+        return [("", "blank")] * k
+    if family == Family.SHUFFLED:
+        return _shuffled_variants(instr, banks, k, rng)
+    return _bank_variants(instr, family, banks, k, rng)
+
+
 def make_variants(baseline: InstructionSet, families: tuple[str, ...], k: int, banks: Banks,
                   seed: int, rng: np.random.Generator) -> list[InstructionSet]:
-    """K variant sequences per family, in family order then k. ``rng`` drives every draw, in a
-    fixed order: family, instruction, k; ``seed`` (the --seed it came from) is recorded."""
+    """K variant sequences per family (``blank``: one), in family order then k. ``rng`` drives
+    every draw, in a fixed order: family, instruction, k; ``seed`` (the --seed it came from) is
+    recorded."""
     sets = []
     for family in families:
-        per_instr = [
-            _noise_variants(ins, banks, k, rng) if family == "noise"
-            else _bank_variants(ins, family, banks, k, rng)
-            for ins in baseline.instructions
-        ]
-        for kk in range(k):
+        n = variants_of(family, k)
+        per_instr = [_family_variants(family, ins, banks, n, rng) for ins in baseline.instructions]
+        for kk in range(n):
             instrs = tuple(
                 Instruction(
                     id=ins.id, trigger=ins.trigger, text=per_instr[n][kk][0], intent=ins.intent,

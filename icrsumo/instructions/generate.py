@@ -26,10 +26,11 @@ from ..fsio import check_out_dir, dumps_json, write_atomic
 from ..networks import load_net
 from ..scenario import Scenario, check_against_net, find_scenarios, read_scenario
 from ..types import InstructionSet, Maneuver
+from ..vocab import CONTROL_FAMILIES
 from .banks import Banks, load_banks
 from .baseline import build_baseline
 from .baseline_bank import BaselineBank, load_baseline_bank
-from .families import FAMILIES, make_variants
+from .families import ALL_FAMILIES, FAMILIES, make_variants
 from .maneuvers import extract_maneuvers, is_highway
 from .store import FORMAT, route_document
 
@@ -52,10 +53,10 @@ class GenerateOptions:
     baseline_bank: Path | BaselineBank | None = None
 
     def check(self) -> None:
-        bad = [f for f in self.families if f not in FAMILIES]
+        bad = [f for f in self.families if f not in ALL_FAMILIES]
         if bad or not self.families:
             raise InputError("--families", "", f"unknown family {bad[0] if bad else '(none)'}",
-                             f"use some of {', '.join(FAMILIES)}")
+                             f"use some of {', '.join(ALL_FAMILIES)}")
         if not 1 <= self.k <= 64:
             raise InputError("--k", "", f"K={self.k} out of range", "use 1 to 64 (default 8)")
         if self.workers < 1:
@@ -110,8 +111,11 @@ def generate_route(scenario_dir: Path, opts: GenerateOptions) -> tuple[str, dict
     else:
         from .llm import llm_variants
 
+        rng = route_rng(opts.seed, sc.route_id)  # the control families need no model
         variants = [v for fam in opts.families
-                    for v in llm_variants(baseline, fam, opts.k, opts.seed, opts.llm)]
+                    for v in (make_variants(baseline, (fam,), opts.k, banks, opts.seed, rng)
+                              if fam in CONTROL_FAMILIES
+                              else llm_variants(baseline, fam, opts.k, opts.seed, opts.llm))]
         generator = f"llm:{opts.llm.model}"
     meta = {"seed": opts.seed, "k": opts.k, "families": list(opts.families),
             "generator": generator, "banks_sha256": banks.sha256,
@@ -135,9 +139,12 @@ def _job(args: tuple[str, GenerateOptions]) -> tuple[str, str, str]:
         raise
 
 
-def generate(scenarios: Path, out: Path, opts: GenerateOptions) -> tuple[list[str], list[str]]:
+def generate(scenarios: Path, out: Path, opts: GenerateOptions,
+             refuse_empty: bool = False) -> tuple[list[str], list[str]]:
     """Write ``OUT/<route>.json`` per route and ``OUT/index.json``; returns (route ids written,
-    failure lines). Template banks are validated before any route is touched."""
+    failure lines). Template banks are validated before any route is touched. With
+    ``refuse_empty``, a run in which no route could be generated writes nothing and raises the
+    first route's InputError."""
     opts.check()
     scenarios = Path(scenarios)
     check_out_dir(Path(out))
@@ -159,6 +166,8 @@ def generate(scenarios: Path, out: Path, opts: GenerateOptions) -> tuple[list[st
             results = list(pool.map(_job, jobs))
     else:
         results = [_job(j) for j in jobs]
+    if refuse_empty and results and all(status != "ok" for status, _, _ in results):
+        raise InputError.of_line(results[0][2])  # nothing to write: the (first) reason
     written, failures, index = [], [], []
     for status, rid, payload in results:
         if status != "ok":

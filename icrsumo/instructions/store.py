@@ -97,6 +97,19 @@ def _check_maneuver(c: DocChecker, m: object, place: str) -> None:
             c.number(m[k], f"{place}.{k}")
 
 
+def read_maneuvers(path: Path) -> tuple[Maneuver, ...]:
+    """The route's maneuvers recorded in a route file (route order); InputErrors as
+    :func:`read_instruction_sets`."""
+    doc = read_json_doc(path, FORMAT, "instruction file", "run icrsumo generate")
+    c = DocChecker(path, _FIX)
+    out = []
+    for i, m in enumerate(c.lst(doc.get("maneuvers", []), "maneuvers")):
+        _check_maneuver(c, m, f"maneuvers[{i}]")
+        fields = {k: m[k] for k in ("junction", "junction_id", "exit", "length", "end", "lanes") if k in m}
+        out.append(Maneuver(kind=m["kind"], pos=float(m["pos"]), intent=Intent(m["intent"]), **fields))
+    return tuple(out)
+
+
 def read_instruction_sets(path: Path) -> list[InstructionSet]:
     """All sequences of a route file: the baseline first, then variants in file order. Every
     problem (wrong types, unknown family or intent, missing keys, triggers out of order, no

@@ -215,3 +215,13 @@ def test_stored_episodes_outside_the_selection_are_counted(suite, tmp_path, caps
     summary = run_evaluation(_opts(out, suite, agents=("instruction-follower",))).summary
     assert summary["episodes"]["stored_not_in_report"] == 2
     assert "2 stored episodes of other agents" in capsys.readouterr().err
+
+
+@pytest.mark.sumo
+def test_control_families_run_beside_the_others_and_the_oracle_ignores_them(suite, tmp_path):
+    res = run_evaluation(_opts(tmp_path / "o", suite, agents=("route-oracle",),
+                               families=("noise", "blank", "shuffled"), k=2))
+    assert res.episodes == 1 + 2 + 1 + 2  # baseline, noise x2, blank x1, shuffled x2
+    fams = res.summary["agents"]["route-oracle"]["families"]
+    assert list(fams) == ["noise", "blank", "shuffled"]
+    assert all(fams[f]["dDS"] == 0.0 and fams[f]["dRC"] == 0.0 for f in fams)

@@ -527,7 +527,7 @@ def test_cli_train_runs_with_a_good_config(data, tmp_path, capsys):
 
 
 @pytest.mark.parametrize(("extra", "words"), [
-    (["--seed", "-1"], ["--seed: -1 is negative"]),
+    (["--seed", "-1"], ["--seed: -1: out of range"]),
     (["--limit", "-2"], ["--limit: -2 is negative"]),
     (["--driver", "route-oracle"], ["--driver: route-oracle: is a privileged agent"]),
     (["--driver", "NOPE.pt"], ["NOPE.pt: agent checkpoint not found"]),
