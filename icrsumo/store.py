@@ -44,9 +44,7 @@ class ResultStore:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._db = sqlite3.connect(str(self.path))
         with self._guard("opening"):
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA synchronous=FULL")
-            if existed:
+            if existed:  # checked before anything is written to it (journal mode included)
                 bad = [r[0] for r in self._db.execute("PRAGMA quick_check")]
                 if bad != ["ok"]:
                     raise sqlite3.DatabaseError(bad[0])
@@ -54,6 +52,8 @@ class ResultStore:
                 if tables and "episodes" not in tables:
                     shown = ", ".join(sorted(tables))[:80]
                     raise sqlite3.DatabaseError(f"no episodes table (tables: {shown})")
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=FULL")
             self._db.executescript(_SCHEMA)
             self._db.commit()
 

@@ -48,6 +48,8 @@ def _store(path: Path, n: int = 200) -> Path:
     (["--seed", "-1"], "--seed: -1: out of range"),
     (["--seed", "99999999999999999999999"], "out of range"),
     (["--max-batch", "0"], "must be at least 1"),
+    (["--family", ""], "--family: is empty"),
+    (["--agent", " , "], "--agent: is empty"),
     (["--k", "x"], "invalid int value"),
     (["--traffic", "huge"], "invalid choice"),
     (["--agent", "remote:http://127.0.0.1:99999"], "bad port"),
@@ -114,7 +116,7 @@ def test_report_on_a_damaged_configuration(tmp_path, capsys, config, expect):
 
 
 @pytest.mark.parametrize("column, value", [("infractions", "{oops"), ("ds", "'high'"), ("status", "'maybe'"),
-                                           ("infractions", "'[1, 2, 3]'")])
+                                           ("infractions", "'[1, 2, 3]'"), ("ds", "9e999")])
 def test_a_damaged_row_names_its_episode(tmp_path, capsys, column, value):
     import sqlite3
 
@@ -123,10 +125,27 @@ def test_a_damaged_row_names_its_episode(tmp_path, capsys, column, value):
     _store(out / "results.sqlite", 3)
     (out / "config.json").write_text('{"suite": "tiny", "k": 1, "seed": 2026}')
     with sqlite3.connect(out / "results.sqlite") as db:
-        quoted = value if value.startswith("'") else "'" + value + "'"
+        quoted = value if value.startswith("'") or value[0].isdigit() else "'" + value + "'"
         db.execute(f"UPDATE episodes SET {column} = {quoted} WHERE route_id = 'r001'")
     line = _one_line_error(capsys, ["report", str(out)])
     assert "cruise/r001/noise/0/2026" in line
+
+
+def test_a_database_that_is_not_a_store_and_a_config_with_a_key_twice(tmp_path, capsys):
+    import sqlite3
+
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "config.json").write_text('{"suite": "tiny", "k": 1, "k": 2, "seed": 2026}')
+    _store(out / "results.sqlite", 2)
+    assert "key 'k' appears twice" in _one_line_error(capsys, ["report", str(out)])
+    (out / "config.json").write_text('{"suite": "tiny", "k": 1, "seed": 2026}')
+    (out / "results.sqlite").unlink()
+    with sqlite3.connect(out / "results.sqlite") as db:
+        db.execute("CREATE TABLE notes (x TEXT)")
+    before = (out / "results.sqlite").read_bytes()
+    assert "no episodes table (tables: notes)" in _one_line_error(capsys, ["report", str(out)])
+    assert (out / "results.sqlite").read_bytes() == before
 
 
 def test_the_last_resort_is_one_line_and_debug_shows_the_traceback(tmp_path, capsys, monkeypatch):
@@ -225,3 +244,20 @@ def test_control_families_run_beside_the_others_and_the_oracle_ignores_them(suit
     fams = res.summary["agents"]["route-oracle"]["families"]
     assert list(fams) == ["noise", "blank", "shuffled"]
     assert all(fams[f]["dDS"] == 0.0 and fams[f]["dRC"] == 0.0 for f in fams)
+
+
+@pytest.mark.sumo
+def test_a_damaged_stored_log_leaves_the_tables_whole(suite, tmp_path, capsys):
+    import sqlite3
+
+    out = tmp_path / "o"
+    run_evaluation(_opts(out, suite, agents=("route-oracle",), rollout_route=None))
+    with sqlite3.connect(out / "results.sqlite") as db:
+        db.execute("UPDATE episodes SET log = x'00010203' WHERE family = 'noise'")
+    capsys.readouterr()
+    assert main(["report", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "1 stored episode logs cannot be read" in err and "its stored log is damaged" in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["episodes"] == {"done": 2, "crashed": 0}
+    assert summary["agents"]["route-oracle"]["families"]["noise"]["decisions"]["followed_route"] == 0
