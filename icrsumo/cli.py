@@ -145,6 +145,24 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_attack(args: argparse.Namespace) -> int:
+    from .attack import AttackOptions, attack_table, run_attack
+
+    t0 = time.perf_counter()
+    agents = _split_list(args.agent, "--agent") or None
+    timeout = None if args.agent_timeout == 0 else args.agent_timeout
+    opts = AttackOptions(out=Path(args.out), suite=args.suite, seed=args.seed, budget=args.budget,
+                         routes=_split_list(args.routes, "--routes") or None, constraint=args.constraint,
+                         workers=args.workers, traffic=args.traffic, quiet=args.quiet, compare=args.compare,
+                         agent_timeout=timeout, **({"agents": agents} if agents else {}))
+    doc = run_attack(opts)
+    if not args.quiet:
+        print(attack_table(doc))
+    print(f"attack: {sum(a['successes'] for a in doc['agents'].values())} routes broken, "
+          f"{time.perf_counter() - t0:.0f} s -> {args.out}", file=sys.stderr)
+    return 0
+
+
 def _cmd_report(args: argparse.Namespace) -> int:
     from .evaluation import report_only
 
@@ -332,6 +350,31 @@ def build_parser() -> argparse.ArgumentParser:
                    "server that was down, a wrong device)")
     v.set_defaults(func=_cmd_evaluate)
 
+    at = sub.add_parser(
+        "attack", help="search for instruction rewrites that make an agent fail (resumable)",
+        description="Per route, a seeded (1+1) evolutionary search over rewrites of the baseline "
+        "instructions (paraphrase bank entries and noise operations that keep the meaning; --constraint "
+        "misleading adds the misleading bank), each candidate scored by a real closed-loop episode stored "
+        "like any other; writes OUT/attack.json and OUT/attack.md, with a transfer table between agents.",
+    )
+    at.add_argument("--suite", default="tiny", help="as for evaluate (default tiny)")
+    at.add_argument("--agent", action="append", help="as for evaluate (repeatable; default bev-token)")
+    at.add_argument("--routes", action="append", help="only these route ids (comma separated)")
+    at.add_argument("--seed", type=int, default=2026, help="seed of the search and the suite (default 2026)")
+    at.add_argument("--budget", type=int, default=32,
+                    help="queries (episodes) per agent and route (default 32)")
+    at.add_argument("--constraint", choices=["goal", "misleading"], default="goal",
+                    help="goal: rewrites keep the meaning (default); misleading: the misleading bank too")
+    at.add_argument("--compare", type=Path, metavar="EVAL_OUT",
+                    help="an evaluate out folder on the same suite: its fixed grid beside the search")
+    at.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes")
+    at.add_argument("--traffic", choices=["none", "light", "normal", "dense"], default="normal")
+    at.add_argument("--agent-timeout", type=float, default=60.0, metavar="S",
+                    help="seconds an agent call may take (default 60; 0: no limit)")
+    at.add_argument("--out", default="attack_out", help="output folder (default attack_out)")
+    at.add_argument("--quiet", action="store_true", help="no progress bar or table")
+    at.set_defaults(func=_cmd_attack)
+
     r = sub.add_parser("report", help="rebuild summary, tables and figures of an evaluation folder")
     r.add_argument("out", help="the --out folder of icrsumo evaluate")
     r.add_argument("--quiet", action="store_true")
@@ -408,7 +451,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: subcommands whose --out is a folder they write (checked before they start)
-_WRITES_OUT = ("convert-routes", "generate", "evaluate", "collect", "train")
+_WRITES_OUT = ("convert-routes", "generate", "evaluate", "attack", "collect", "train")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -272,12 +272,37 @@ def _check_option(shown: Path, tag: str, value: str, step_length: float) -> None
         raise InputError(shown, place, "must be true or false", _FIX)
 
 
+def _number_or(value: str | None, default: float) -> float:
+    try:
+        return float(value) if value is not None else default
+    except ValueError:
+        return default
+
+
+def _check_route_file(path: Path, end: float) -> None:
+    """A scenario's route file: demand elements only, every departure a time (s) within the
+    simulation's ``end``."""
+    routes = parse_xml_file(path, expected_root="routes", what="SUMO route file", fix=_FIX)
+    for e in routes.iter():
+        if e.tag not in ROUTE_ELEMENTS:
+            raise InputError(path, f"<{e.tag[:40]}>", "is not a demand element a scenario may hold",
+                             f"keep to {', '.join(sorted(ROUTE_ELEMENTS))}")
+        depart = e.get("depart")
+        if depart is not None:
+            t = _number_or(depart, math.nan)
+            if not 0.0 <= t <= end:  # NaN (not a time) fails too
+                raise InputError(path, f"<{e.tag} id={short(e.get('id', ''))} depart={short(depart)}>",
+                                 f"is not a time within the simulation (0 to {end:g} s)", _FIX)
+
+
 def _check_sumocfg(cfg: Path, shown: Path, net: Path, step_length: float) -> None:
     """The SUMO config parses (safely), sets only the options convert-routes writes, with sane
     values, runs the manifest's network, and every route file it names exists and holds only
     demand elements: ``sumo -c`` reads them all."""
     root = parse_xml_file(cfg, expected_root="configuration", what="SUMO config",
                           fix="use the scenario.sumocfg written by icrsumo convert-routes")
+    end_el = root.find("./time/end")
+    end = 1e7 if end_el is None else _number_or(end_el.get("value"), 1e7)
     for el in root.iter():
         tag = el.tag if isinstance(el.tag, str) else ""
         if tag not in SUMOCFG_OPTIONS:  # e.g. *-output, which would make SUMO write files
@@ -304,11 +329,7 @@ def _check_sumocfg(cfg: Path, shown: Path, net: Path, step_length: float) -> Non
             if tag == "net-file":
                 check_xml_file(path, "network file", _FIX)
                 continue
-            routes = parse_xml_file(path, expected_root="routes", what="SUMO route file", fix=_FIX)
-            bad = next((e.tag for e in routes.iter() if e.tag not in ROUTE_ELEMENTS), None)
-            if bad is not None:
-                raise InputError(path, f"<{bad[:40]}>", "is not a demand element a scenario may hold",
-                                 f"keep to {', '.join(sorted(ROUTE_ELEMENTS))}")
+            _check_route_file(path, end)
 
 
 def read_scenario(path: Path) -> Scenario:

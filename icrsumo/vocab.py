@@ -78,6 +78,9 @@ class Family(StrEnum):
     MISLEADING = "misleading"
     BLANK = "blank"
     SHUFFLED = "shuffled"
+    #: ``icrsumo attack``'s queries (k = the query) and the transfer of its worst rewrites
+    ATTACK = "attack"
+    TRANSFER = "transfer"
 
 
 #: the four counterfactual families, in the paper's order (the default selection)

@@ -483,6 +483,9 @@ def test_scenario_sumo_files_missing_or_hostile(converted_one, tmp_path, capsys)
     veh.write_text(veh_text.replace("</routes>", '<edgeData id="d" file="/tmp/x.xml"/></routes>'))
     with pytest.raises(InputError, match=r"ego.rou.xml: <edgeData>: is not a demand element"):
         read_scenario(sc)
+    veh.write_text(veh_text.replace("</routes>", '<vehicle id="v" route="ego_route" depart="1e6"/></routes>'))
+    with pytest.raises(InputError, match=r"ego.rou.xml: <vehicle id='v' depart='1e6'>: is not a time"):
+        read_scenario(sc)
     veh.write_text(veh_text[: len(veh_text) // 2])
     with pytest.raises(InputError, match=r"ego.rou.xml: line \d+, column \d+: malformed XML"):
         read_scenario(sc)

@@ -135,7 +135,8 @@ def _job(args: tuple[str, GenerateOptions]) -> tuple[str, str, str]:
         from .llm import LLMError
 
         if isinstance(err, LLMError):
-            return "failed", d, f"{d}: {err}"
+            return "failed", d, InputError(d, "LLM", " ".join(str(err).split())[:300],
+                                           "check --endpoint and --model, and that the server answers").line()
         raise
 
 

@@ -43,6 +43,11 @@ TRAIN_FORMAT = "icrsumo-train/1"
 _DEFAULT_TEXT_LEN = {"token": 32, "ngram": 192}
 
 
+#: upper bounds of the integer sizes of a training config (a value past them cannot run here)
+LIMITS = {"steps": 10**8, "batch": 65_536, "eval_every": 10**8, "checkpoint_every": 10**8, "width": 4096,
+          "hidden": 4096, "variants": 1024}
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """Training options (TOML keys). Sizes in frames; ``lr`` peak of a one-cycle schedule;
@@ -94,13 +99,14 @@ class TrainConfig:
                      f"write e.g. {f.name} = {f.default}")
         if self.encoder not in ENCODERS:
             fail("encoder", f"unknown encoder {self.encoder!r}", f"use one of {', '.join(ENCODERS)}")
-        for name in ("steps", "batch", "eval_every", "checkpoint_every", "width", "hidden", "variants"):
-            if getattr(self, name) < 1:
-                fail(name, f"{name} must be at least 1, not {getattr(self, name)}", "give a positive number")
-        if self.buckets < 2:
-            fail("buckets", f"buckets must be at least 2, not {self.buckets}", "give e.g. 8192")
-        if self.text_len < 0:
-            fail("text_len", f"text_len must not be negative, not {self.text_len}",
+        for name, most in LIMITS.items():
+            if not 1 <= getattr(self, name) <= most:
+                fail(name, f"{name} must be 1 to {most:,}, not {getattr(self, name)}",
+                     f"give 1 to {most:,}")
+        if not 2 <= self.buckets <= 1 << 24:
+            fail("buckets", f"buckets must be 2 to {1 << 24:,}, not {self.buckets}", "give e.g. 8192")
+        if not 0 <= self.text_len <= 4096:
+            fail("text_len", f"text_len must be 0 to 4096, not {self.text_len}",
                  "give 0 (the encoder's default) or a positive length")
         if not 0 <= self.seed < 2**63:
             fail("seed", f"seed {self.seed} out of range", "use 0 to 2**63 - 1")

@@ -117,10 +117,11 @@ CONFIGS = {
     "negative-lr": (b"lr = -1\n", ["lr must be positive, not -1.0"]),
     "zero-lr": (b"lr = 0.0\n", ["lr must be positive"]),
     "nan-val-fraction": (b"val_fraction = nan\n", ["val_fraction"]),
-    "zero-steps": (b"steps = 0\n", ["steps must be at least 1, not 0"]),
-    "negative-batch": (b"batch = -5\n", ["batch must be at least 1, not -5"]),
+    "zero-steps": (b"steps = 0\n", ["steps must be 1 to 100,000,000, not 0"]),
+    "negative-batch": (b"batch = -5\n", ["batch must be 1 to 65,536, not -5"]),
+    "huge-batch": (b"batch = 1000000000000\n", ["batch must be 1 to 65,536, not 1000000000000"]),
     "negative-seed": (b"seed = -1\n", ["seed -1 out of range"]),
-    "one-bucket": (b"buckets = 1\n", ["buckets must be at least 2"]),
+    "one-bucket": (b"buckets = 1\n", ["buckets must be 2 to"]),
     "negative-decay": (b"weight_decay = -0.1\n", ["weight_decay must not be negative"]),
     "val-fraction": (b"val_fraction = 0.7\n", ["val_fraction 0.7 out of range"]),
     "probability": (b"p_noise = 2\n", ["p_noise 2.0 is not a probability"]),
@@ -158,7 +159,7 @@ def test_config_path_that_is_no_file(make, words, tmp_path):
 
 
 @pytest.mark.parametrize(("override", "option", "words"), [
-    ({"steps": 0}, "--steps", ["steps must be at least 1, not 0"]),
+    ({"steps": 0}, "--steps", ["steps must be 1 to 100,000,000, not 0"]),
     ({"seed": -3}, "--seed", ["seed -3 out of range"]),
     ({"device": "tpu"}, "--device", ["device 'tpu': unknown device"]),
     ({"device": "cuda:99"}, "--device", ["device 'cuda:99': this machine has"]),
@@ -480,7 +481,7 @@ def _cli(argv: list[str], capsys) -> str:
     ("nan-lr", [], ["lr must be a finite number, not nan"]),
     ("utf16", [], ["UTF-16-encoded"]),
     ("tpu", ["--device", "tpu"], ["--device: device 'tpu': unknown device"]),
-    ("zero-steps", ["--steps", "0"], ["--steps: steps must be at least 1"]),
+    ("zero-steps", ["--steps", "0"], ["--steps: steps must be 1 to"]),
     ("missing-data", [], ["data folder not found"]),
     ("bad-manifest", [], ["collect.json: line 1, column 2: malformed JSON"]),
     ("truncated-episode", [], ["route_01__p0.npz: episode file is truncated or damaged"]),

@@ -1,0 +1,442 @@
+"""``icrsumo attack``: a seeded, resumable search per route for rewrites of the baseline
+instructions that make a given agent fail.
+
+The space (:func:`icrsumo.instructions.rewrites.rewrite_pool`): per instruction, the paraphrase
+bank's entries of its intent, noise operations on its text and on those paraphrases, every one
+classifying as the baseline intent (``--constraint goal``, the default); ``--constraint
+misleading`` adds the misleading bank's entries. The method is a (1+1) evolutionary search: the
+current sequence starts as the baseline; each query changes one instruction (a position drawn
+among those with rewrites, then a rewrite drawn from its pool, both with a Generator seeded by
+(seed, route, agent)), runs the closed-loop episode, and keeps the new sequence when its DS is
+no higher than the current one's. A route counts where the agent's baseline episode completes;
+the attack succeeds on it when a query's episode does not (RD or TO). Every query is a real
+episode stored like any other (family ``attack``, k = the query, 1 .. budget), so a rerun, or a
+larger budget, replays the search from the store and runs only what is missing. The worst
+rewrite found for each agent and route is then driven by the other agents (family
+``transfer``, k = a stable id of the agent it was found for).
+"""
+
+from __future__ import annotations
+
+import statistics
+import sys
+import zlib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from .agents.registry import DEFAULT_AGENT, agent_name
+from .convert import safe_name
+from .errors import InputError
+from .evaluation.options import EvalOptions
+from .evaluation.plan import Job, plan_jobs, prepare_suite
+from .evaluation.progress import Progress
+from .evaluation.run import resolve_agents, run_queue
+from .fsio import dumps_json, read_json, write_atomic
+from .instructions.banks import load_banks
+from .instructions.rewrites import rewrite_pool
+from .instructions.store import read_instruction_sets, read_maneuvers, route_document
+from .store import ResultStore
+from .types import Instruction, InstructionSet
+from .vocab import Family
+
+#: queries per route by default: the cost of the paper's fixed grid (4 families x 8 variants)
+BUDGET = 32
+CONSTRAINTS = ("goal", "misleading")
+
+
+@dataclass(frozen=True)
+class AttackOptions:
+    """One attack: ``suite``, ``agents``, ``routes`` (None: all), ``seed`` and ``traffic`` as in
+    ``evaluate``; ``budget`` queries (episodes) per agent and route; ``constraint`` goal (meaning
+    kept) or misleading (the misleading bank too); ``compare``: an ``evaluate`` out folder on the
+    same suite whose fixed grid (paraphrase and noise) is reported beside the search."""
+
+    out: Path
+    suite: str = "tiny"
+    agents: tuple[str, ...] = (DEFAULT_AGENT,)
+    routes: tuple[str, ...] | None = None
+    seed: int = 2026
+    budget: int = BUDGET
+    constraint: str = "goal"
+    workers: int = 1
+    traffic: str = "normal"
+    quiet: bool = True
+    compare: Path | None = None
+    agent_timeout: float | None = 60.0
+
+    def eval_options(self) -> EvalOptions:
+        """The evaluation options of the out folder (K = 1: the generated variants go unused)."""
+        return EvalOptions(
+            out=Path(self.out),
+            suite=self.suite,
+            agents=self.agents,
+            families=(),
+            k=1,
+            seed=self.seed,
+            routes=self.routes,
+            workers=self.workers,
+            traffic=self.traffic,
+            quiet=self.quiet,
+            agent_timeout=self.agent_timeout,
+        )
+
+    def check(self) -> None:
+        if not 1 <= self.budget <= 1024:
+            raise InputError("--budget", str(self.budget), "out of range", "use 1 to 1024 (default 32)")
+        if self.constraint not in CONSTRAINTS:
+            raise InputError("--constraint", self.constraint, "unknown constraint", "use goal or misleading")
+        if self.compare is not None and not (Path(self.compare) / "results.sqlite").is_file():
+            raise InputError(
+                "--compare",
+                str(self.compare),
+                "not an evaluate out folder (no results.sqlite)",
+                "pass the --out folder of an icrsumo evaluate run on the same suite",
+            )
+        replace(self.eval_options(), families=("paraphrase",)).check()
+
+
+@dataclass
+class _Search:
+    """The search of one agent on one route."""
+
+    spec: str
+    agent: str
+    route: str
+    scenario: str
+    baseline: InstructionSet
+    maneuvers: tuple
+    pools: dict[int, tuple[tuple[str, str], ...]]
+    rng: np.random.Generator
+    base_ds: float
+    current: dict[int, int] = field(default_factory=dict)  # position -> pool index
+    current_ds: float = 0.0
+    sets: list[InstructionSet] = field(default_factory=list)
+    results: list[tuple[int, float, str]] = field(default_factory=list)  # (query, DS, termination class)
+    first_success: int | None = None
+    pending: dict[int, int] = field(default_factory=dict)  # the choice of the query under way
+
+    def propose(self, q: int) -> InstructionSet:
+        positions = sorted(self.pools)
+        pos = positions[int(self.rng.integers(len(positions)))]
+        pool = self.pools[pos]
+        pick = int(self.rng.integers(len(pool)))
+        if pick == self.current.get(pos) and len(pool) > 1:
+            pick = (pick + 1) % len(pool)
+        choice = {**self.current, pos: pick}
+        self.pending = choice
+        return InstructionSet(
+            self.route,
+            Family.ATTACK,
+            q,
+            self.baseline.seed,
+            tuple(_rewritten(ins, self.pools, choice) for ins in self.baseline.instructions),
+            self.baseline.notices,
+        )
+
+
+def _rewritten(ins: Instruction, pools: dict, choice: dict[int, int]) -> Instruction:
+    if ins.id not in choice:
+        return replace(ins, template="keep", source=ins.text)
+    text, tid = pools[ins.id][choice[ins.id]]
+    return replace(
+        ins, text=text, template=tid, source=ins.text, distance=ins.distance if "[x]" in text else None
+    )
+
+
+def _agent_id(name: str) -> int:
+    return zlib.crc32(name.encode("utf-8")) & 0x7FFFFFFF
+
+
+def _write_sets(path: Path, s: _Search, extra: list[InstructionSet]) -> None:
+    meta = {"seed": s.baseline.seed, "k": len(s.sets), "families": ["attack"], "generator": "attack"}
+    write_atomic(path, dumps_json(route_document(s.baseline, s.sets + extra, list(s.maneuvers), meta)))
+
+
+def run_attack(opts: AttackOptions) -> dict:
+    """Run (or resume) the attack; writes OUT/attack.json and OUT/attack.md and returns the
+    attack document."""
+    opts.check()
+    eopts = opts.eval_options()
+    factories = resolve_agents(opts.agents)
+    names = {spec: agent_name(spec, f) for spec, f in factories.items()}
+    out = Path(opts.out)
+    ResultStore.check(out / "results.sqlite")
+    prep = prepare_suite(eopts)
+    for line in prep.skipped:
+        print(f"icrsumo: skipped: {line}", file=sys.stderr)
+    jobs = [
+        j for j in plan_jobs(eopts, prep.scenarios, prep.instructions, names) if j.route_id in prep.routes
+    ]
+    banks = load_banks(None)
+    with ResultStore(out / "results.sqlite") as store:
+        have = store.keys()
+        with Progress(len(jobs) * (opts.budget + 1), opts.quiet) as progress:
+            run_queue([j for j in jobs if j.key not in have], eopts, store, progress)
+            recs = {(r.agent, r.route_id, str(r.family), r.k): r for r in store.records()}
+            searches = []
+            for j in jobs:
+                b = recs.get((j.agent, j.route_id, "baseline", 0))
+                if b is None or b.status != "done" or b.termination_class != "done":
+                    continue
+                f = prep.instructions / f"{safe_name(j.route_id)}.json"
+                base = read_instruction_sets(f)[0]
+                pools = {
+                    ins.id: p
+                    for ins in base.instructions
+                    if (p := rewrite_pool(ins, banks, opts.seed, j.route_id, opts.constraint == "misleading"))
+                }
+                if not pools:
+                    continue
+                rng = np.random.default_rng([opts.seed, zlib.crc32(j.route_id.encode()), _agent_id(j.agent)])
+                searches.append(
+                    _Search(
+                        j.agent_spec,
+                        j.agent,
+                        j.route_id,
+                        j.scenario,
+                        base,
+                        read_maneuvers(f),
+                        pools,
+                        rng,
+                        b.ds,
+                        current_ds=b.ds,
+                    )
+                )
+            folder = out / "attack" / opts.constraint
+            for q in range(1, opts.budget + 1):
+                batch = []
+                for s in searches:
+                    s.sets.append(s.propose(q))
+                    path = folder / safe_name(s.agent) / f"{safe_name(s.route)}.json"
+                    _write_sets(path, s, [])
+                    batch.append(
+                        Job(
+                            s.spec, s.agent, s.route, Family.ATTACK.value, q, opts.seed, s.scenario, str(path)
+                        )
+                    )
+                have = store.keys()
+                todo = [j for j in batch if j.key not in have]
+                for _ in range(len(batch) - len(todo)):
+                    progress.tick()
+                run_queue(todo, eopts, store, progress)
+                recs = {(r.agent, r.route_id, r.k): r for r in store.records() if r.family == Family.ATTACK}
+                for s in searches:
+                    r = recs[(s.agent, s.route, q)]
+                    ds = r.ds if r.status == "done" else s.current_ds + 1.0  # a crash is no progress
+                    s.results.append((q, ds, str(r.termination_class) if r.status == "done" else "crashed"))
+                    if r.status == "done" and r.termination_class != "done" and s.first_success is None:
+                        s.first_success = q
+                    if ds <= s.current_ds:
+                        s.current, s.current_ds = s.pending, ds
+        transfer = _transfer(opts, eopts, store, searches, jobs, folder)
+        doc = _document(opts, names, searches, transfer, jobs, recs_baseline(store))
+    write_atomic(out / "attack.json", dumps_json(doc))
+    write_atomic(out / "attack.md", attack_table(doc))
+    return doc
+
+
+def recs_baseline(store: ResultStore) -> dict[tuple[str, str], object]:
+    return {(r.agent, r.route_id): r for r in store.records() if r.family == Family.BASELINE}
+
+
+def _worst(s: _Search) -> tuple[int, float]:
+    """(query, DS) of the lowest-DS episode of a search (the first of equals)."""
+    q, ds, _ = min(s.results, key=lambda x: (x[1], x[0]))
+    return q, ds
+
+
+def _transfer(
+    opts: AttackOptions,
+    eopts: EvalOptions,
+    store: ResultStore,
+    searches: list[_Search],
+    jobs: list[Job],
+    folder: Path,
+) -> dict:
+    """Drive each agent's worst rewrite per route with every other agent (family transfer)."""
+    agents = sorted({j.agent for j in jobs})
+    if len(agents) < 2:
+        return {}
+    spec_of = {j.agent: j.agent_spec for j in jobs}
+    base = recs_baseline(store)
+    batch = []
+    for s in searches:
+        q, _ = _worst(s)
+        worst = replace(s.sets[q - 1], family=Family.TRANSFER, k=_agent_id(s.agent))
+        path = folder / "transfer" / safe_name(s.agent) / f"{safe_name(s.route)}.json"
+        write_atomic(
+            path,
+            dumps_json(
+                route_document(
+                    s.baseline,
+                    [worst],
+                    list(s.maneuvers),
+                    {"seed": s.baseline.seed, "k": 1, "families": ["transfer"], "generator": "attack"},
+                )
+            ),
+        )
+        for other in agents:
+            b = base.get((other, s.route))
+            if other != s.agent and b is not None and b.status == "done" and b.termination_class == "done":
+                batch.append(
+                    Job(
+                        spec_of[other],
+                        other,
+                        s.route,
+                        Family.TRANSFER.value,
+                        _agent_id(s.agent),
+                        opts.seed,
+                        s.scenario,
+                        str(path),
+                    )
+                )
+    have = store.keys()
+    with Progress(len(batch), opts.quiet) as progress:
+        run_queue([j for j in batch if j.key not in have], eopts, store, progress)
+    recs = {(r.agent, r.route_id, r.k): r for r in store.records() if r.family == Family.TRANSFER}
+    table: dict[str, dict[str, dict]] = {}
+    for j in batch:
+        source = next(a for a in agents if _agent_id(a) == j.k)
+        r = recs[(j.agent, j.route_id, j.k)]
+        cell = table.setdefault(source, {}).setdefault(j.agent, {"routes": 0, "failed": 0})
+        cell["routes"] += 1
+        cell["failed"] += int(r.status == "done" and r.termination_class != "done")
+    for row in table.values():
+        for cell in row.values():
+            cell["success_rate"] = round(cell["failed"] / cell["routes"], 4) if cell["routes"] else None
+    return table
+
+
+def _grid(compare: Path | None, agent: str) -> dict | None:
+    """The fixed grid's goal-preserving families of ``agent`` in an evaluate folder: their
+    worst ΔDS and the routes any of their variants broke."""
+    if compare is None:
+        return None
+    summary = read_json(Path(compare) / "summary.json", "evaluation summary", "run icrsumo report on it")
+    fams = summary.get("agents", {}).get(agent, {}).get("families", {})
+    with ResultStore(Path(compare) / "results.sqlite") as store:
+        recs = [r for r in store.records() if r.agent == agent]
+    done = {r.route_id for r in recs if r.family == Family.BASELINE and r.termination_class == "done"}
+    broken = sorted(
+        {
+            r.route_id
+            for r in recs
+            if r.family in (Family.PARAPHRASE, Family.NOISE)
+            and r.route_id in done
+            and r.status == "done"
+            and r.termination_class != "done"
+        }
+    )
+    return {f: {"worst_dDS": fams[f].get("worst_dDS")} for f in ("paraphrase", "noise") if f in fams} | {
+        "broken_routes": broken
+    }
+
+
+def _document(
+    opts: AttackOptions, names: dict, searches: list[_Search], transfer: dict, jobs: list[Job], base: dict
+) -> dict:
+    agents: dict[str, dict] = {}
+    for agent in sorted(set(names.values())):
+        mine = [s for s in searches if s.agent == agent]
+        completed = [
+            j.route_id
+            for j in jobs
+            if j.agent == agent
+            and (b := base.get((agent, j.route_id)))
+            and b.status == "done"
+            and b.termination_class == "done"
+        ]
+        routes = {}
+        for s in mine:
+            q, ds = _worst(s)
+            routes[s.route] = {
+                "baseline_DS": round(s.base_ds, 4),
+                "first_success": s.first_success,
+                "worst_DS": round(ds, 4),
+                "worst_dDS": round(ds - s.base_ds, 4),
+                "worst_query": q,
+                "queries": len(s.results),
+                "instructions": [
+                    {"id": i.id, "text": i.text, "template": i.template} for i in s.sets[q - 1].instructions
+                ],
+            }
+        wins = [s.first_success for s in mine if s.first_success is not None]
+        grid = _grid(opts.compare, agent)
+        agents[agent] = {
+            "routes_searched": len(mine),
+            "routes_completed_by_baseline": len(completed),
+            "successes": len(wins),
+            "success_rate": round(len(wins) / len(mine), 4) if mine else None,
+            "median_queries": statistics.median(wins) if wins else None,
+            "worst_dDS": round(float(np.mean([r["worst_dDS"] for r in routes.values()])), 4)
+            if routes
+            else None,
+            "grid": grid,
+            "broken_not_by_grid": None
+            if grid is None
+            else sorted(
+                s.route for s in mine if s.first_success is not None and s.route not in grid["broken_routes"]
+            ),
+            "routes": routes,
+        }
+    return {
+        "suite": opts.suite,
+        "seed": opts.seed,
+        "budget": opts.budget,
+        "constraint": opts.constraint,
+        "method": "(1+1) evolutionary search over one-instruction rewrites, seeded per route and agent",
+        "agents": agents,
+        "transfer": transfer,
+    }
+
+
+def attack_table(doc: dict) -> str:
+    """Markdown: per agent the success rate, median queries, worst ΔDS (and the fixed grid's),
+    then the transfer table."""
+    md = [
+        f"Attack on {doc['suite']} (constraint {doc['constraint']}, budget {doc['budget']} per route, "
+        f"seed {doc['seed']})",
+        "",
+        "| Agent | routes | successes | success rate % | median queries | worst ΔDS | grid worst ΔDS "
+        "(paraphrase / noise) | broken where the grid did not |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for agent, a in doc["agents"].items():
+        g = a["grid"]
+        grid = (
+            "—"
+            if g is None
+            else " / ".join(
+                "—" if g.get(f) is None or g[f]["worst_dDS"] is None else f"{g[f]['worst_dDS']:+.1f}"
+                for f in ("paraphrase", "noise")
+            )
+        )
+        rate = "—" if a["success_rate"] is None else f"{100 * a['success_rate']:.1f}"
+        worst = "—" if a["worst_dDS"] is None else f"{a['worst_dDS']:+.1f}"
+        med = "—" if a["median_queries"] is None else f"{a['median_queries']:g}"
+        beyond = "—" if a["broken_not_by_grid"] is None else str(len(a["broken_not_by_grid"]))
+        md.append(
+            f"| {agent} | {a['routes_searched']} | {a['successes']} | {rate} | {med} | {worst} | {grid} | "
+            f"{beyond} |"
+        )
+    if doc["transfer"]:
+        md += [
+            "",
+            "Transfer: the worst rewrite found for the row's agent, driven by the column's agent "
+            "(share of routes it fails, among those whose baseline it completes):",
+            "",
+        ]
+        cols = sorted({c for row in doc["transfer"].values() for c in row})
+        md += ["| found for | " + " | ".join(cols) + " |", "|---|" + "---:|" * len(cols)]
+        for src, row in doc["transfer"].items():
+            md.append(
+                f"| {src} | "
+                + " | ".join(
+                    "—" if c not in row else f"{100 * row[c]['success_rate']:.0f} % of {row[c]['routes']}"
+                    for c in cols
+                )
+                + " |"
+            )
+    return "\n".join(md) + "\n"
