@@ -84,6 +84,13 @@ def _cmd_run_episode(args: argparse.Namespace) -> int:
 
     sc = read_scenario(Path(args.scenario))
     sets = read_instruction_sets(Path(args.instructions))
+    from .networks import load_net
+    from .scenario import check_against_net
+
+    check_against_net(sc, load_net(sc.net))
+    for option, value in (("--log", args.log), ("--video", args.video)):
+        if value is not None and (not str(value).strip() or Path(value).is_dir()):
+            raise InputError(option, str(value), "is a folder (or empty), not a file", "give a file path")
     if sets[0].route_id != sc.route_id:
         raise InputError(args.instructions, "route_id", f"is for route {sets[0].route_id!r}, the scenario is "
                          f"route {sc.route_id!r}", "pass the instruction file generated for this scenario")
@@ -466,6 +473,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.command in _WRITES_OUT:
             from .fsio import check_out_dir
 
+            if not str(args.out).strip():
+                raise InputError("--out", "", "is empty", "give a folder (new or existing)")
             check_out_dir(Path(args.out))
         return args.func(args)
     except InputError as err:
@@ -476,6 +485,14 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("icrsumo: interrupted", file=sys.stderr)
         return 130
+    except OSError as err:  # a file the command reads or writes, named by the system
+        if args.debug:
+            raise
+        # os.replace names its source (our temporary file) first and the destination second
+        where = err.filename2 or err.filename or "(a file)"
+        print(f"icrsumo: error: {where}: {err.strerror or err} (fix: check the path: a folder where a file "
+              f"belongs, or the reverse, or its permissions)", file=sys.stderr)
+        return 2
     except Exception as err:  # the last resort: still one line
         if args.debug:
             raise

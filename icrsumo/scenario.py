@@ -134,6 +134,8 @@ class Scenario:
 def _rel_file(c: DocChecker, base: Path, value: Any, place: str, what: str) -> Path:
     """A file named relative to ``base`` by key ``place``: it must exist and be a file."""
     rel = c.string(value, place, nonempty=True, limit=4096)
+    if "\x00" in rel:
+        raise c.fail(place, f"{what} name {short(rel)} holds a NUL character", _FIX)
     path = (base / rel).resolve()
     if not path.is_file():
         why = "a folder" if path.is_dir() else "no such file"
@@ -169,7 +171,7 @@ def check_manifest(m: dict, c: DocChecker) -> None:
     ego = c.obj(c.key(m, "ego"), "ego")
     for k in ("vtype", "route"):
         c.string(c.key(ego, k, "ego"), f"ego.{k}", nonempty=True)
-    c.number(c.key(ego, "depart", "ego"), "ego.depart", 0.0, 1e6)
+    c.number(c.key(ego, "depart", "ego"), "ego.depart", 0.0, 3600.0)  # convert-routes' --warmup range
     for k in ("length", "width"):
         c.number(c.key(ego, k, "ego"), f"ego.{k}", 0.0, 100.0, lo_open=True)
     edges = c.lst(c.key(ego, "edges", "ego"), "ego.edges", 1)

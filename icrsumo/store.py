@@ -127,6 +127,8 @@ class ResultStore:
         for r in rows:
             d = dict(zip(_COLUMNS, r))
             try:
+                if d["status"] == "done" and None in (d["ds"], d["rc"], d["is_"]):
+                    raise TypeError("a finished episode without its scores")
                 for c in ("ds", "rc", "is_", "length", "duration", "k", "seed", "attempts"):
                     if d[c] is not None and (not isinstance(d[c], (int, float)) or not math.isfinite(d[c])):
                         raise TypeError(f"{c} is {d[c]!r}, not a finite number")

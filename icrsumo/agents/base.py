@@ -134,6 +134,10 @@ class AgentTimeout(AgentError):
     a retry would wait the whole timeout again."""
 
 
+#: waypoints an action may hold (a controller needs a few metres ahead, not a map)
+MAX_WAYPOINTS = 1000
+
+
 def validate_action(action: object) -> Action:
     """Check an agent's output; raise :class:`AgentError` saying what is wrong in plain words."""
     if not isinstance(action, Action):
@@ -150,6 +154,8 @@ def validate_action(action: object) -> Action:
     wps = np.asarray(action.waypoints)
     if wps.ndim != 2 or wps.shape[1] != 2 or wps.shape[0] < 1:
         raise AgentError(f"waypoints must have shape (N, 2) with N >= 1, got {wps.shape}")
+    if wps.shape[0] > MAX_WAYPOINTS:
+        raise AgentError(f"at most {MAX_WAYPOINTS} waypoints, got {wps.shape[0]}")
     if not np.issubdtype(wps.dtype, np.number) or not np.all(np.isfinite(wps)):
         raise AgentError("waypoints contain NaN, inf or non-numbers")
     ts = action.target_speed

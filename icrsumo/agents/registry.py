@@ -170,7 +170,7 @@ def load_class(spec: str) -> type:
             module = importlib.import_module(target)
     except InputError:
         raise
-    except (Exception, SystemExit) as err:  # the user's module failed to import (or exited)
+    except BaseException as err:  # noqa: BLE001 - the user's module failed to import (or exited)
         raise InputError("--agent", spec, f"cannot import {target} ({type(err).__name__}: {err})",
                          "make the module importable (PYTHONPATH, dependencies)") from None
     cls = getattr(module, cls_name, None)

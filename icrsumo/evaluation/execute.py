@@ -137,9 +137,9 @@ class EpisodeWorker:
             return Outcome.finished(rec, dumps_log(log))
         except Interrupted:  # the user's Ctrl-C (in-process runs): stop the evaluation
             raise
-        except (Exception, SystemExit, KeyboardInterrupt) as err:
-            # an agent or the simulator failed (agent code calling sys.exit or raising
-            # KeyboardInterrupt included): the caller retries / records
+        except BaseException as err:  # noqa: BLE001 - any failure of the agent or the simulator
+            # (agent code calling sys.exit, raising KeyboardInterrupt or its own BaseException
+            # included): the caller retries / records
             return Outcome.of_error(err)
 
     def close(self) -> None:

@@ -54,6 +54,7 @@ def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_di
     routes: dict[str, tuple | None] = {}
     out = {}
     damaged: list[str] = []
+    unreadable: list[str] = []
     for r in records:
         if r.status != "done":
             continue
@@ -64,8 +65,7 @@ def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_di
                 routes[r.route_id] = (read_maneuvers(path), sets)
             except InputError as err:
                 routes[r.route_id] = None
-                print(f"icrsumo: note: no decision attribution for route {r.route_id}: {err.line()}",
-                      file=sys.stderr)
+                unreadable.append(err.line())
         route = routes[r.route_id]
         if route is None or (r.family, r.k) not in route[1]:
             continue
@@ -77,6 +77,9 @@ def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_di
         if log is not None:
             out[(r.agent, r.route_id, str(r.family), r.k, r.seed)] = classify_decisions(
                 route[0], route[1][(r.family, r.k)], log)
+    if unreadable:
+        print(f"icrsumo: note: no decision attribution for {len(unreadable)} routes whose instruction file "
+              f"cannot be read (first: {unreadable[0]})", file=sys.stderr)
     if damaged:
         print(f"icrsumo: note: {len(damaged)} stored episode logs cannot be read, so their decisions are "
               f"not in the attribution (first: {damaged[0]})", file=sys.stderr)

@@ -148,6 +148,41 @@ def test_a_database_that_is_not_a_store_and_a_config_with_a_key_twice(tmp_path, 
     assert (out / "results.sqlite").read_bytes() == before
 
 
+@pytest.mark.parametrize("command", [["evaluate", "--quiet"], ["convert-routes", "tiny"]])
+def test_an_empty_out_is_refused(capsys, command):
+    assert "--out: is empty" in _one_line_error(capsys, [*command, "--out", ""])
+
+
+@pytest.mark.parametrize("raising", ["raise KeyboardInterrupt", "class Boom(BaseException):\n    pass\n"
+                                     "raise Boom('x')", "import sys\nsys.exit(3)"])
+def test_agent_modules_that_raise_anything_at_import_are_one_line(tmp_path, capsys, raising):
+    (tmp_path / "bad_agent.py").write_text(raising + "\n")
+    line = _one_line_error(capsys, ["evaluate", "--agent", f"{tmp_path / 'bad_agent.py'}:A",
+                                    "--out", str(tmp_path / "o"), "--quiet"])
+    assert "cannot import" in line and not (tmp_path / "o").exists()
+
+
+def test_huge_actions_are_refused():
+    import numpy as np
+
+    from icrsumo.agents.base import MAX_WAYPOINTS, Action, AgentError, validate_action
+
+    with pytest.raises(AgentError, match=f"at most {MAX_WAYPOINTS} waypoints, got 1000000"):
+        validate_action(Action(waypoints=np.ones((10**6, 2))))
+
+
+def test_a_folder_where_an_output_file_belongs_is_one_line(tmp_path, capsys):
+    out = tmp_path / "o"
+    out.mkdir()
+    _store(out / "results.sqlite", 3)
+    (out / "config.json").write_text('{"suite": "tiny", "k": 1, "seed": 2026}')
+    (out / "summary.json").mkdir()
+    code = main(["report", str(out), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and "Traceback" not in "".join(err)
+    assert err[-1].startswith(f"icrsumo: error: {out / 'summary.json'}: Is a directory (fix: check the path")
+
+
 def test_the_last_resort_is_one_line_and_debug_shows_the_traceback(tmp_path, capsys, monkeypatch):
     import icrsumo.evaluation.run as run
 
@@ -172,14 +207,15 @@ def _opts(out, suite, **kw) -> EvalOptions:
 
 @pytest.mark.sumo
 def test_agent_code_that_exits_is_a_crash_in_process(suite, tmp_path):
-    res = run_evaluation(_opts(tmp_path / "o", suite, agents=(f"{AGENTS}:Exits", f"{AGENTS}:Interrupts"),
-                               agent_timeout=None))
-    assert (res.done, res.crashed) == (0, 4)
+    res = run_evaluation(_opts(tmp_path / "o", suite, agents=(f"{AGENTS}:Exits", f"{AGENTS}:Interrupts",
+                                                              f"{AGENTS}:RaisesBase"), agent_timeout=None))
+    assert (res.done, res.crashed) == (0, 6)
     with ResultStore(tmp_path / "o" / "results.sqlite") as s:
         msgs = {r.agent: r.message for r in s.records()}
     assert msgs["exits"].startswith("SystemExit: 0 at user_agents.py")
     assert msgs["interrupts"].startswith("KeyboardInterrupt")
-    assert json.loads((tmp_path / "o" / "summary.json").read_text())["episodes"]["crashed"] == 4
+    assert msgs["raises-base"].startswith("Boom: not an Exception")
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["episodes"]["crashed"] == 6
 
 
 @pytest.mark.sumo

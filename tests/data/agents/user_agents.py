@@ -204,3 +204,19 @@ class Flaky(Cruise):
         if Path("flaky.marker").exists():
             raise ConnectionError("the service it needs is down")
         return super().act(obs)
+
+
+class Boom(BaseException):
+    """Not an Exception: what careless agent code may raise."""
+
+
+class RaisesBase(Cruise):
+    """Raises a BaseException of its own on its second decision."""
+
+    name = "raises-base"
+
+    def act(self, obs: Observation) -> Action:
+        self.n = getattr(self, "n", 0) + 1
+        if self.n == 2:
+            raise Boom("not an Exception")
+        return super().act(obs)
