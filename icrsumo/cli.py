@@ -23,6 +23,9 @@ def _cmd_convert_routes(args: argparse.Namespace) -> int:
     if not routes.exists() and args.routes in bundled_suites():
         routes = bundled_suites()[args.routes]
         coords = coords or suite_coords(args.routes)  # a bundled suite knows its frame
+    elif not routes.exists():
+        raise InputError(args.routes, "", "no such route file or bundled suite",
+                         f"give a route XML file or one of {', '.join(bundled_suites())}")
     opts = ConvertOptions(
         coords=coords or "sumo", traffic=args.traffic, net=args.net, xodr=args.xodr,
         net_dir=args.net_dir, max_snap=args.max_snap, seed=args.seed, warmup=args.warmup,
@@ -101,7 +104,17 @@ def _cmd_run_episode(args: argparse.Namespace) -> int:
                          f"pick one of {', '.join(have[:6])}, ...")
     args.agent = args.agent or DEFAULT_AGENT
     agent = make_agent(args.agent)
-    log = run_episode(sc, chosen[0], agent, callbacks=[VideoRecorder(Path(args.video))] if args.video else ())
+    callbacks = [VideoRecorder(Path(args.video))] if args.video else ()
+    try:
+        log = run_episode(sc, chosen[0], agent, callbacks=callbacks)
+    except (InputError, OSError, KeyboardInterrupt):
+        raise
+    except Exception as err:  # the agent (or the simulator) failed: one line, as evaluate stores it
+        from .errors import describe
+
+        why = " ".join(describe(err).split())[:300]
+        raise InputError("--agent", args.agent, f"the episode failed: {why}",
+                         f"fix the agent (icrsumo check-agent {args.agent} finds such problems)") from None
     result = score_episode(log)
     if args.log:
         write_log(Path(args.log), log)

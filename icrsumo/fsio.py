@@ -39,7 +39,7 @@ def read_text(path: Path, what: str, fix: str = "") -> str:
     except FileNotFoundError:
         raise InputError(path, "", f"{what} not found", fix or "check the path") from None
     except IsADirectoryError:
-        raise InputError(path, "", f"is a folder, not a {what} file", fix or "pass the file") from None
+        raise InputError(path, "", f"is a folder, not a file ({what})", fix or "pass the file") from None
     except PermissionError:
         raise InputError(path, "", f"{what} is not readable (permission denied)",
                          "check the file's permissions") from None

@@ -154,9 +154,13 @@ def _drive(factory: Callable, caller: ThreadWatch, scenario, iset, timeout: floa
 def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUITE, timeout: float = 10.0,
                 max_act_ms: float = MAX_ACT_MS, max_decisions: int = MAX_DECISIONS) -> CheckReport:
     """Check agent ``spec``; InputError when the spec cannot be loaded at all (bad input)."""
-    if not timeout > 0 or not max_act_ms > 0 or max_decisions < 1:
-        raise InputError("check-agent", "", "--timeout and --max-act-ms must be positive, --decisions >= 1",
-                         "give positive numbers")
+    for option, value in (("--timeout", timeout), ("--max-act-ms", max_act_ms)):
+        if not 0 < value < float("inf"):
+            unit = "seconds" if option == "--timeout" else "milliseconds"
+            raise InputError(option, f"{value:g}", f"must be a positive number of {unit}",
+                             "give a positive number")
+    if max_decisions < 1:
+        raise InputError("--decisions", str(max_decisions), "must be at least 1", "give a positive count")
     found: list[Finding] = []
 
     def report() -> CheckReport:

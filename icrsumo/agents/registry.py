@@ -160,7 +160,8 @@ def load_class(spec: str) -> type:
         if target.endswith(".py"):
             path = Path(target)
             if not path.is_file():
-                raise InputError(path, "", "agent file not found", "check the path before ':'")
+                problem = "is a folder, not an agent file" if path.is_dir() else "agent file not found"
+                raise InputError(path, "", problem, "check the path before ':'")
             name = f"icrsumo_user_agent_{abs(hash(str(path.resolve())))}"
             mod_spec = importlib.util.spec_from_file_location(name, path)
             module = importlib.util.module_from_spec(mod_spec)
@@ -209,8 +210,11 @@ def agent_factory(spec: str, device: str | None = None) -> Callable[[], Agent]:
 
 
 def agent_name(spec: str, agent: object) -> str:
-    """The name results are stored under: the agent's ``name`` attribute, else the spec."""
-    return str(getattr(agent, "name", "") or spec)
+    """The name results are stored under: the agent's (or its class's) ``name`` when it is a
+    non-empty string, else the spec (a ``name`` property read on the class is no name: its text
+    would change from run to run)."""
+    name = getattr(agent, "name", None)
+    return name if isinstance(name, str) and name.strip() else spec
 
 
 def make_agent(spec: str, device: str | None = None) -> Agent:

@@ -58,7 +58,7 @@ class AgentServer(BatchingCore):
             self.httpd = ThreadingHTTPServer((host, port), Handler)
         except (OSError, OverflowError, TypeError) as err:
             why = getattr(err, "strerror", "") or err
-            raise InputError("--port", f"{host}:{port}", f"cannot listen ({why})",
+            raise InputError("--host/--port", f"{host}:{port}", f"cannot listen ({why})",
                              "pick a free port or another --host") from None
         self.httpd.daemon_threads = True
         self.host, self.port = self.httpd.server_address[:2]

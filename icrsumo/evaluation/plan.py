@@ -3,6 +3,7 @@ and the episode jobs of the paired protocol in their fixed order."""
 
 from __future__ import annotations
 
+import re
 import shutil
 import sys
 from collections.abc import Callable, Iterable, Mapping
@@ -117,6 +118,12 @@ def prepare_suite(opts: EvalOptions) -> PreparedSuite:
         if not written and not (out / "results.sqlite").exists():  # (with a store: run checks it)
             lines = list(skipped) + list(failures)
             raise InputError.of_line(lines[0]) if lines else no_routes(opts)
+        for rid in opts.routes or ():  # a selected route that was skipped: its own reason
+            named = re.compile(rf"(^|[/ ']){re.escape(rid)}([/ ':,]|$)")
+            why = next((line for line in (*skipped, *failures) if rid not in written and named.search(line)),
+                       None)
+            if why is not None:
+                raise InputError.of_line(why)
         check_route_ids(opts, written)
         out.mkdir(parents=True, exist_ok=True)
         write_atomic(out / "config.json", dumps_json(config))

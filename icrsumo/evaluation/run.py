@@ -137,9 +137,12 @@ def report_only(out: Path, quiet: bool = False) -> dict:
     returns the summary."""
     out = Path(out)
     cfg_path = out / "config.json"
-    if not cfg_path.is_file() or not (out / "results.sqlite").is_file():
-        raise InputError(out, "", "not an evaluation folder (no config.json / results.sqlite)",
-                         "pass the --out folder of icrsumo evaluate")
+    for need in (cfg_path, out / "results.sqlite"):
+        if not need.is_file():
+            why = "is a folder, not a file" if need.is_dir() else "is missing" if not need.exists() \
+                else "cannot be read (a broken link?)"
+            raise InputError(need, "", f"{why}: {out} is not an evaluation folder",
+                             "pass the --out folder of icrsumo evaluate")
     cfg = read_json(cfg_path, "evaluation configuration", "restore it from a copy")
     fix = "restore it from a copy"
     expect(cfg, dict, cfg_path, "", "the configuration", fix)

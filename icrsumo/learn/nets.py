@@ -353,7 +353,7 @@ def load(path: Path, what: str = "checkpoint", fix: str = _CHECKPOINT_FIX) -> di
     dict is an InputError naming it (``what`` names the file in the message)."""
     path = Path(path)
     if path.is_dir():
-        raise InputError(path, "", f"is a folder, not a {what} file", "pass the .pt file")
+        raise InputError(path, "", f"is a folder, not a file ({what})", "pass the .pt file")
     try:
         if path.stat().st_size == 0:
             raise InputError(path, "", f"{what} is empty (0 bytes)", fix)

@@ -297,3 +297,36 @@ def test_a_damaged_stored_log_leaves_the_tables_whole(suite, tmp_path, capsys):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["episodes"] == {"done": 2, "crashed": 0}
     assert summary["agents"]["route-oracle"]["families"]["noise"]["decisions"]["followed_route"] == 0
+
+
+def test_a_name_property_on_the_class_is_no_name():
+    from icrsumo.agents.registry import agent_name
+
+    class Named:
+        @property
+        def name(self):
+            return "dynamic"
+
+    assert agent_name("mod.py:Named", Named) == "mod.py:Named"
+    assert agent_name("x", type("A", (), {"name": "cruise"})) == "cruise"
+    assert agent_name("x", type("A", (), {"name": "  "})) == "x"
+
+
+@pytest.mark.parametrize("argv, expect", [
+    (["check-agent", "route-oracle", "--timeout", "nan"],
+     "--timeout: nan: must be a positive number of seconds"),
+    (["check-agent", "route-oracle", "--decisions", "0"], "--decisions: 0: must be at least 1"),
+    (["convert-routes", "no-such-suite", "--out", "unused"],
+     "no-such-suite: no such route file or bundled suite"),
+])
+def test_each_bad_value_is_named(capsys, argv, expect):
+    assert expect in _one_line_error(capsys, argv)
+
+
+def test_report_names_what_is_missing(tmp_path, capsys):
+    out = tmp_path / "o"
+    out.mkdir()
+    _store(out / "results.sqlite", 1)
+    (out / "config.json").mkdir()
+    line = _one_line_error(capsys, ["report", str(out)])
+    assert f"{out / 'config.json'}: is a folder, not a file" in line

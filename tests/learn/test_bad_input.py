@@ -151,7 +151,7 @@ def test_cuda_device_without_cuda(tmp_path):
 
 @pytest.mark.parametrize(("make", "words"), [
     (lambda p: p, ["training config not found"]),
-    (lambda p: p.mkdir() or p, ["is a folder, not a training config file"]),
+    (lambda p: p.mkdir() or p, ["is a folder, not a file (training config)"]),
 ])
 def test_config_path_that_is_no_file(make, words, tmp_path):
     path = make(tmp_path / "missing.toml")
