@@ -36,7 +36,7 @@ from .evaluation.run import resolve_agents, run_queue
 from .fsio import dumps_json, read_json, write_atomic
 from .instructions.banks import load_banks
 from .instructions.rewrites import rewrite_pool
-from .instructions.store import read_instruction_sets, read_maneuvers, route_document
+from .instructions.store import read_route_file, route_document
 from .store import ResultStore
 from .types import Instruction, InstructionSet
 from .vocab import Family
@@ -170,18 +170,19 @@ def run_attack(opts: AttackOptions) -> dict:
         j for j in plan_jobs(eopts, prep.scenarios, prep.instructions, names) if j.route_id in prep.routes
     ]
     banks = load_banks(None)
-    with ResultStore(out / "results.sqlite") as store:
+    with ResultStore(out / "results.sqlite", verify=False) as store:  # checked above
         have = store.keys()
         with Progress(len(jobs) * (opts.budget + 1), opts.quiet) as progress:
             run_queue([j for j in jobs if j.key not in have], eopts, store, progress)
-            recs = {(r.agent, r.route_id, str(r.family), r.k): r for r in store.records()}
+            baselines = _baselines(store)
             searches = []
             for j in jobs:
-                b = recs.get((j.agent, j.route_id, "baseline", 0))
+                b = baselines.get((j.agent, j.route_id))
                 if b is None or b.status != "done" or b.termination_class != "done":
                     continue
                 f = prep.instructions / f"{safe_name(j.route_id)}.json"
-                base = read_instruction_sets(f)[0]
+                sets, maneuvers = read_route_file(f)
+                base = sets[0]
                 pools = {
                     ins.id: p
                     for ins in base.instructions
@@ -197,7 +198,7 @@ def run_attack(opts: AttackOptions) -> dict:
                         j.route_id,
                         j.scenario,
                         base,
-                        read_maneuvers(f),
+                        maneuvers,
                         pools,
                         rng,
                         b.ds,
@@ -221,7 +222,7 @@ def run_attack(opts: AttackOptions) -> dict:
                 for _ in range(len(batch) - len(todo)):
                     progress.tick()
                 run_queue(todo, eopts, store, progress)
-                recs = {(r.agent, r.route_id, r.k): r for r in store.records() if r.family == Family.ATTACK}
+                recs = {(r.agent, r.route_id, r.k): r for r in store.records(Family.ATTACK)}
                 for s in searches:
                     r = recs[(s.agent, s.route, q)]
                     ds = r.ds if r.status == "done" else s.current_ds + 1.0  # a crash is no progress
@@ -231,14 +232,14 @@ def run_attack(opts: AttackOptions) -> dict:
                     if ds <= s.current_ds:
                         s.current, s.current_ds = s.pending, ds
         transfer = _transfer(opts, eopts, store, searches, jobs, folder)
-        doc = _document(opts, names, searches, transfer, jobs, recs_baseline(store))
+        doc = _document(opts, names, searches, transfer, jobs, _baselines(store))
     write_atomic(out / "attack.json", dumps_json(doc))
     write_atomic(out / "attack.md", attack_table(doc))
     return doc
 
 
-def recs_baseline(store: ResultStore) -> dict[tuple[str, str], object]:
-    return {(r.agent, r.route_id): r for r in store.records() if r.family == Family.BASELINE}
+def _baselines(store: ResultStore) -> dict[tuple[str, str], object]:
+    return {(r.agent, r.route_id): r for r in store.records(Family.BASELINE)}
 
 
 def _worst(s: _Search) -> tuple[int, float]:
@@ -260,7 +261,7 @@ def _transfer(
     if len(agents) < 2:
         return {}
     spec_of = {j.agent: j.agent_spec for j in jobs}
-    base = recs_baseline(store)
+    base = _baselines(store)
     batch = []
     for s in searches:
         q, _ = _worst(s)
@@ -295,7 +296,7 @@ def _transfer(
     have = store.keys()
     with Progress(len(batch), opts.quiet) as progress:
         run_queue([j for j in batch if j.key not in have], eopts, store, progress)
-    recs = {(r.agent, r.route_id, r.k): r for r in store.records() if r.family == Family.TRANSFER}
+    recs = {(r.agent, r.route_id, r.k): r for r in store.records(Family.TRANSFER)}
     table: dict[str, dict[str, dict]] = {}
     for j in batch:
         source = next(a for a in agents if _agent_id(a) == j.k)

@@ -26,7 +26,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from .errors import InputError, check_seed
-from .fsio import check_out_dir, dumps_json, replace_dir_atomic, sha256_file, write_atomic
+from .fsio import OutFolder, check_out_dir, dumps_json, replace_dir_atomic, sha256_file, write_atomic
 from .networks import convert_xodr, load_net
 from .resources import bundled_towns
 from .routes import read_routes
@@ -309,8 +309,7 @@ def convert_routes(routes_file: Path, out_dir: Path, opts: ConvertOptions,
     routes_file = Path(routes_file)
     out_dir = Path(out_dir)
     check_out_dir(out_dir)
-    fresh = not out_dir.exists()
-    empty = not fresh and not any(out_dir.iterdir())
+    before = OutFolder.before(out_dir)
     specs, parse_errors = read_routes(routes_file)
     net_store = out_dir / "networks"
     # a user's network is read whole (load_net: unsafe XML, not a SUMO network) before anything
@@ -360,11 +359,7 @@ def convert_routes(routes_file: Path, out_dir: Path, opts: ConvertOptions,
         index.append({"id": s.id, "town": s.town, "dir": f"scenarios/{name}"})
     report.failures = [msg for _, msg in sorted(failed)]
     if refuse_empty and report.failures and not (report.converted or report.reused):
-        if fresh or empty:
-            for child in out_dir.iterdir():
-                shutil.rmtree(child, ignore_errors=True) if child.is_dir() else child.unlink(missing_ok=True)
-            if fresh:
-                out_dir.rmdir()
+        before.undo()
         raise InputError.of_line(report.failures[0])
     write_atomic(out_dir / "index.json", dumps_json({
         "format": "icrsumo-index/1", "routes_file": routes_file.name,

@@ -8,6 +8,7 @@ import os
 import re
 import shutil
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,20 @@ BOMS = ((b"\xff\xfe\x00\x00", "UTF-32"), (b"\x00\x00\xfe\xff", "UTF-32"), (b"\xf
          (b"\xfe\xff", "UTF-16"))
 
 
+def unreadable(path: Path, what: str, fix: str, err: OSError) -> Exception:
+    """The InputError of an OSError met reading a user's file ``path`` (``what`` names it)."""
+    from .errors import InputError
+
+    if isinstance(err, FileNotFoundError):
+        return InputError(path, "", f"{what} not found", fix or "check the path")
+    if isinstance(err, IsADirectoryError):
+        return InputError(path, "", f"is a folder, not a file ({what})", fix or "pass the file")
+    if isinstance(err, PermissionError):
+        return InputError(path, "", f"{what} is not readable (permission denied)",
+                          "check the file's permissions")
+    return InputError(path, "", f"{what} cannot be read ({err.strerror or err})", fix or "check the path")
+
+
 def read_text(path: Path, what: str, fix: str = "") -> str:
     """The UTF-8 text of a user's file (a UTF-8 byte-order mark is dropped); InputErrors for a
     missing file, a folder, no permission, and text that is not UTF-8 (UTF-16 named as such).
@@ -36,16 +51,8 @@ def read_text(path: Path, what: str, fix: str = "") -> str:
     path = Path(path)
     try:
         raw = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(path, "", f"{what} not found", fix or "check the path") from None
-    except IsADirectoryError:
-        raise InputError(path, "", f"is a folder, not a file ({what})", fix or "pass the file") from None
-    except PermissionError:
-        raise InputError(path, "", f"{what} is not readable (permission denied)",
-                         "check the file's permissions") from None
     except OSError as err:
-        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})",
-                         fix or "check the path") from None
+        raise unreadable(path, what, fix, err) from None
     for bom, name in BOMS:
         if raw.startswith(bom):
             raise InputError(path, "", f"{what} is {name}-encoded, not UTF-8", "save it as UTF-8")
@@ -62,16 +69,19 @@ def read_text(path: Path, what: str, fix: str = "") -> str:
                          "save it as UTF-8") from None
 
 
-def _no_constants(name: str) -> Any:
+def no_constants(name: str) -> Any:
+    """``json.loads`` hook: NaN and Infinity are no JSON numbers (a ValueError)."""
     raise ValueError(f"{name} is not a JSON number")
 
 
-def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict:
-    keys = [k for k, _ in pairs]
-    dup = next((k for i, k in enumerate(keys) if k in keys[:i]), None)
-    if dup is not None:
-        raise ValueError(f"key {dup[:60]!r} appears twice in one object")
-    return dict(pairs)
+def no_duplicates(pairs: list[tuple[str, Any]]) -> dict:
+    """``json.loads`` hook: a key twice in one object is a ValueError naming it."""
+    out: dict = {}
+    for key, value in pairs:
+        if key in out:
+            raise ValueError(f"duplicate key {key[:60]!r} appears twice in one object")
+        out[key] = value
+    return out
 
 
 def read_json(path: Path, what: str, fix: str = "") -> Any:
@@ -81,7 +91,7 @@ def read_json(path: Path, what: str, fix: str = "") -> Any:
 
     text = read_text(path, what, fix)
     try:
-        return json.loads(text, parse_constant=_no_constants, object_pairs_hook=_no_duplicates)
+        return json.loads(text, parse_constant=no_constants, object_pairs_hook=no_duplicates)
     except RecursionError:
         raise InputError(path, "", f"{what} is nested too deeply to be read",
                          fix or "check the file") from None
@@ -125,6 +135,30 @@ def check_out_dir(path: Path, option: str = "--out") -> None:
     if not os.access(probe, os.W_OK | os.X_OK):
         where = "the folder" if probe == path else f"its parent {probe}"
         raise InputError(option, str(path), f"{where} is not writable", "give a folder you can write to")
+
+
+@dataclass(frozen=True)
+class OutFolder:
+    """What a command's out folder was before it started (absent, or an empty folder), so that a
+    refused run can take back what it wrote (:meth:`undo`). Take it with :meth:`before`."""
+
+    path: Path
+    fresh: bool
+    empty: bool
+
+    @classmethod
+    def before(cls, path: Path) -> OutFolder:
+        path = Path(path)
+        fresh = not path.exists()
+        return cls(path, fresh, not fresh and path.is_dir() and not any(path.iterdir()))
+
+    def undo(self) -> None:
+        """Remove a folder that was absent; empty one that was empty (the user's: kept)."""
+        if self.fresh:
+            shutil.rmtree(self.path, ignore_errors=True)
+        elif self.empty:
+            for child in self.path.iterdir():
+                shutil.rmtree(child, ignore_errors=True) if child.is_dir() else child.unlink(missing_ok=True)
 
 
 def write_atomic(path: Path, data: str | bytes) -> None:

@@ -14,7 +14,7 @@ from defusedxml import DefusedXmlException
 from defusedxml.ElementTree import parse as safe_parse
 
 from .errors import InputError, short
-from .fsio import BOMS
+from .fsio import BOMS, unreadable
 from .types import RouteSpec, Waypoint
 
 #: bytes read per step by :func:`check_xml_file`
@@ -54,11 +54,8 @@ def check_xml_file(path: Path, what: str = "XML file", fix: str = "") -> None:
     path = Path(path)
     try:
         st = path.stat()
-    except FileNotFoundError:
-        raise InputError(path, "", f"{what} not found", fix or "check the path") from None
     except OSError as err:
-        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})",
-                         fix or "check the path") from None
+        raise unreadable(path, what, fix, err) from None
     if not path.is_file():
         raise InputError(path, "", f"is a folder, not a {what}" if path.is_dir() else f"{what} is not a file",
                          fix or "pass the file")
@@ -71,12 +68,8 @@ def _check_xml_cached(real: str, mtime_ns: int, size: int, shown: str, what: str
     try:
         with open(real, "rb") as fh:
             _scan(fh, path, Path(real), what, fix)
-    except PermissionError:
-        raise InputError(path, "", f"{what} is not readable (permission denied)",
-                         "check the file's permissions") from None
     except OSError as err:
-        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})",
-                         fix or "check the path") from None
+        raise unreadable(path, what, fix, err) from None
 
 
 def _scan(fh, path: Path, real: Path, what: str, fix: str) -> None:
@@ -135,8 +128,7 @@ def parse_xml_file(path: Path, expected_root: str | None = None, what: str = "ro
     try:
         root = safe_parse(str(path), forbid_dtd=True).getroot()
     except OSError as err:
-        raise InputError(path, "", f"{what} cannot be read ({err.strerror or err})",
-                         fix or "check the path") from None
+        raise unreadable(path, what, fix, err) from None
     except ParseError as err:
         line, col = err.position
         raise InputError(

@@ -36,7 +36,10 @@ CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 class ResultStore:
     """Episode records (and compressed episode logs) keyed by (agent, route, family, k, seed)."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, verify: bool = True) -> None:
+        """Open (or create) the store at ``path``; an existing file is checked first
+        (``PRAGMA quick_check``, which reads every page: ``verify=False`` skips it for a store
+        that :meth:`check` has just passed)."""
         self.path = Path(path)
         existed = self.path.exists()
         if existed and not self.path.is_file():
@@ -45,7 +48,7 @@ class ResultStore:
         self._db = sqlite3.connect(str(self.path))
         with self._guard("opening"):
             if existed:  # checked before anything is written to it (journal mode included)
-                bad = [r[0] for r in self._db.execute("PRAGMA quick_check")]
+                bad = [r[0] for r in self._db.execute("PRAGMA quick_check")] if verify else ["ok"]
                 if bad != ["ok"]:
                     raise sqlite3.DatabaseError(bad[0])
                 tables = {r[0] for r in self._db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
@@ -117,12 +120,12 @@ class ResultStore:
                 return {tuple(r) for r in self._db.execute(sql)}
             return {tuple(r) for r in self._db.execute(sql + " WHERE status = ?", (str(status),))}
 
-    def records(self) -> list[EpisodeRecord]:
-        """Every stored episode, sorted by key."""
+    def records(self, family: str | None = None) -> list[EpisodeRecord]:
+        """Every stored episode (or those of ``family``), sorted by key."""
+        where, args = ("WHERE family = ?", (str(family),)) if family is not None else ("", ())
         with self._guard("reading"):
-            rows = self._db.execute(
-                f"SELECT {', '.join(_COLUMNS)} FROM episodes ORDER BY agent, route_id, family, k, seed"
-            ).fetchall()
+            rows = self._db.execute(f"SELECT {', '.join(_COLUMNS)} FROM episodes {where} "
+                                    "ORDER BY agent, route_id, family, k, seed", args).fetchall()
         out = []
         for r in rows:
             d = dict(zip(_COLUMNS, r))

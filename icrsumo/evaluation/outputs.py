@@ -49,7 +49,7 @@ def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_di
     instruction file cannot be read, or an episode whose stored log is damaged, is left out and
     named on stderr."""
     from ..decisions import classify_decisions
-    from ..instructions.store import read_instruction_sets, read_maneuvers
+    from ..instructions.store import read_route_file
 
     routes: dict[str, tuple | None] = {}
     out = {}
@@ -61,8 +61,8 @@ def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_di
         if r.route_id not in routes:
             path = instr_dir / f"{safe_name(r.route_id)}.json"
             try:
-                sets = {(s.family, s.k): s for s in read_instruction_sets(path)}
-                routes[r.route_id] = (read_maneuvers(path), sets)
+                sets, maneuvers = read_route_file(path)
+                routes[r.route_id] = (maneuvers, {(s.family, s.k): s for s in sets})
             except InputError as err:
                 routes[r.route_id] = None
                 unreadable.append(err.line())

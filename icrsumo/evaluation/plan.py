@@ -4,7 +4,6 @@ and the episode jobs of the paired protocol in their fixed order."""
 from __future__ import annotations
 
 import re
-import shutil
 import sys
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
@@ -13,7 +12,7 @@ from pathlib import Path
 from ..agents.base import Agent
 from ..convert import ConvertOptions, convert_routes, safe_name
 from ..errors import InputError
-from ..fsio import dumps_json, read_json, write_atomic
+from ..fsio import OutFolder, dumps_json, read_json, write_atomic
 from ..instructions.baseline_bank import BaselineBank, load_baseline_bank
 from ..instructions.families import FAMILIES
 from ..instructions.generate import GenerateOptions, generate
@@ -105,8 +104,7 @@ def prepare_suite(opts: EvalOptions) -> PreparedSuite:
     out = Path(opts.out)
     bank = load_baseline_bank(opts.baseline_bank) if opts.baseline_bank is not None else None
     config = check_config(out, opts, bank)
-    fresh = not out.exists()
-    empty = not fresh and out.is_dir() and not any(out.iterdir())
+    before = OutFolder.before(out)
     try:
         scenarios, skipped = _resolve_suite(opts, out)
         instr_dir = out / "instructions"
@@ -119,22 +117,23 @@ def prepare_suite(opts: EvalOptions) -> PreparedSuite:
             lines = list(skipped) + list(failures)
             raise InputError.of_line(lines[0]) if lines else no_routes(opts)
         for rid in opts.routes or ():  # a selected route that was skipped: its own reason
-            named = re.compile(rf"(^|[/ ']){re.escape(rid)}([/ ':,]|$)")
-            why = next((line for line in (*skipped, *failures) if rid not in written and named.search(line)),
-                       None)
+            why = skip_reason((*skipped, *failures), rid) if rid not in written else None
             if why is not None:
                 raise InputError.of_line(why)
         check_route_ids(opts, written)
         out.mkdir(parents=True, exist_ok=True)
         write_atomic(out / "config.json", dumps_json(config))
     except BaseException:
-        if fresh:
-            shutil.rmtree(out, ignore_errors=True)
-        elif empty:  # the user's empty folder: keep it, empty
-            for child in out.iterdir():
-                shutil.rmtree(child, ignore_errors=True) if child.is_dir() else child.unlink(missing_ok=True)
+        before.undo()
         raise
     return PreparedSuite(scenarios, instr_dir, tuple(written), tuple(skipped) + tuple(failures))
+
+
+def skip_reason(lines: Iterable[str], route_id: str) -> str | None:
+    """The first of the skipped-route ``lines`` that names ``route_id`` (as a word or a path
+    part), if any."""
+    named = re.compile(rf"(^|[/ ']){re.escape(route_id)}([/ ':,]|$)")
+    return next((line for line in lines if named.search(line)), None)
 
 
 def no_routes(opts: EvalOptions) -> InputError:

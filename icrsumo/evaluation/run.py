@@ -4,7 +4,6 @@ imported here, once), prepare the suite, plan the jobs, run those not stored yet
 
 from __future__ import annotations
 
-import re
 import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
@@ -21,7 +20,7 @@ from .backends import run_jobs
 from .inference import route_jobs, start_inference, stop_inference
 from .options import EvalOptions
 from .outputs import write_outputs
-from .plan import Job, no_routes, plan_jobs, prepare_suite
+from .plan import Job, no_routes, plan_jobs, prepare_suite, skip_reason
 from .progress import Progress
 
 #: attempts an episode gets at most
@@ -66,7 +65,7 @@ def run_evaluation(opts: EvalOptions) -> EvalResult:
     prep = prepare_suite(opts)
     written = set(prep.routes)
     jobs = [j for j in plan_jobs(opts, prep.scenarios, prep.instructions, names) if j.route_id in written]
-    with ResultStore(out / "results.sqlite") as store:
+    with ResultStore(out / "results.sqlite", verify=False) as store:  # checked above
         check_stored_routes(opts, store, set(names.values()), written, prep.skipped)
         for line in prep.skipped:
             print(f"icrsumo: skipped: {line}", file=sys.stderr)
@@ -102,7 +101,7 @@ def check_stored_routes(opts: EvalOptions, store: ResultStore, agents: set[str],
             lost[route] = lost.get(route, 0) + 1
     if lost:
         route = sorted(lost)[0]
-        why = next((line for line in skipped if re.search(rf"\b{re.escape(route)}\b", line)), "")
+        why = skip_reason(skipped, route) or ""
         raise InputError(store.path, f"route {route}", f"holds {lost[route]} stored episodes, but the route "
                          f"cannot be loaded any more{f' ({why})' if why else ''}"
                          f"{f'; {len(lost) - 1} more such routes' if len(lost) > 1 else ''}",

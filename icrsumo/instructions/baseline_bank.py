@@ -35,6 +35,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from ..errors import InputError
+from ..fsio import no_constants, no_duplicates
 from ..types import Intent
 from .banks import BASELINE_TYPES, ORDINALS
 from .intent import classify_intent
@@ -242,22 +243,9 @@ def _read(path: Path) -> tuple[bytes, str]:
     return raw, text
 
 
-def _no_duplicates(pairs: list[tuple[str, object]]) -> dict:
-    seen: dict[str, object] = {}
-    for key, value in pairs:
-        if key in seen:
-            raise ValueError(f"duplicate key {key!r}")
-        seen[key] = value
-    return seen
-
-
-def _no_constants(name: str) -> object:
-    raise ValueError(f"{name} is not JSON")
-
-
 def _parse(path: Path, text: str) -> dict:
     try:
-        data = json.loads(text, object_pairs_hook=_no_duplicates, parse_constant=_no_constants)
+        data = json.loads(text, object_pairs_hook=no_duplicates, parse_constant=no_constants)
     except json.JSONDecodeError as err:
         raise _fail(path, f"line {err.lineno}, column {err.colno}", f"malformed JSON ({err.msg})",
                     "fix the JSON syntax") from None

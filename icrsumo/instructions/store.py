@@ -97,28 +97,24 @@ def _check_maneuver(c: DocChecker, m: object, place: str) -> None:
             c.number(m[k], f"{place}.{k}")
 
 
-def read_maneuvers(path: Path) -> tuple[Maneuver, ...]:
-    """The route's maneuvers recorded in a route file (route order); InputErrors as
-    :func:`read_instruction_sets`."""
-    doc = read_json_doc(path, FORMAT, "instruction file", "run icrsumo generate")
-    c = DocChecker(path, _FIX)
-    out = []
-    for i, m in enumerate(c.lst(doc.get("maneuvers", []), "maneuvers")):
-        _check_maneuver(c, m, f"maneuvers[{i}]")
-        fields = {k: m[k] for k in ("junction", "junction_id", "exit", "length", "end", "lanes") if k in m}
-        out.append(Maneuver(kind=m["kind"], pos=float(m["pos"]), intent=Intent(m["intent"]), **fields))
-    return tuple(out)
-
-
 def read_instruction_sets(path: Path) -> list[InstructionSet]:
     """All sequences of a route file: the baseline first, then variants in file order. Every
     problem (wrong types, unknown family or intent, missing keys, triggers out of order, no
     baseline first, a (family, k) twice) is an InputError naming the file and the key."""
+    return read_route_file(path)[0]
+
+
+def read_route_file(path: Path) -> tuple[list[InstructionSet], tuple[Maneuver, ...]]:
+    """The sequences of a route file (as :func:`read_instruction_sets`) and the route's
+    maneuvers recorded in it (route order), from one reading of the file."""
     doc = read_json_doc(path, FORMAT, "instruction file", "run icrsumo generate")
     c = DocChecker(path, _FIX)
     route_id = c.string(c.key(doc, "route_id"), "route_id", nonempty=True, limit=200)
+    maneuvers = []
     for i, m in enumerate(c.lst(doc.get("maneuvers", []), "maneuvers")):
         _check_maneuver(c, m, f"maneuvers[{i}]")
+        fields = {k: m[k] for k in ("junction", "junction_id", "exit", "length", "end", "lanes") if k in m}
+        maneuvers.append(Maneuver(kind=m["kind"], pos=float(m["pos"]), intent=Intent(m["intent"]), **fields))
     notices = tuple(_notice(c, n, f"notices[{i}]")
                     for i, n in enumerate(c.lst(doc.get("notices", []), "notices")))
     out: list[InstructionSet] = []
@@ -144,4 +140,4 @@ def read_instruction_sets(path: Path) -> list[InstructionSet]:
                              f"({instructions[i - 1].trigger:g})", "list instructions by trigger")
         out.append(InstructionSet(route_id=route_id, family=family, k=k, seed=seed,
                                   instructions=instructions, notices=notices))
-    return out
+    return out, tuple(maneuvers)

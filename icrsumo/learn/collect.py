@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import io
 import json
-import shutil
 import sys
 import zipfile
 import zlib
@@ -48,7 +47,7 @@ from ..agents.base import Action, Observation
 from ..agents.privileged import RouteOracle
 from ..convert import ConvertOptions, convert_routes, safe_name
 from ..errors import InputError, check_seed, expect
-from ..fsio import dumps_json, read_json_doc, write_atomic
+from ..fsio import OutFolder, dumps_json, read_json_doc, write_atomic
 from ..instructions.banks import load_banks
 from ..instructions.generate import baseline_set
 from ..resources import bundled_suites, suite_coords
@@ -366,15 +365,14 @@ def collect(opts: CollectOptions, out: Path, quiet: bool = False) -> dict:
         if old != config:
             raise InputError(manifest_path, "config", "holds data of a different configuration",
                              "use another --out folder, or the same options")
-    fresh = not out.exists()
+    before = OutFolder.before(out)
     try:
         dirs = find_scenarios(_scenarios(opts, out))
         if not dirs:
             raise InputError(opts.suite, "", "no scenario to collect from (no route converted)",
                              "fix the routes named above, or give another --suite")
     except InputError:
-        if fresh:  # refused before any driving: leave no half-made folder behind
-            shutil.rmtree(out, ignore_errors=True)
+        before.undo()  # refused before any driving: leave no half-made folder behind
         raise
     if opts.limit:
         dirs = dirs[: opts.limit]

@@ -31,6 +31,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ..errors import InputError, expect
+from ..fsio import unreadable
 from ..vocab import Intent
 from .labels import ARC_M, STOP_BELOW
 from .text import ENCODERS, TextEncoder
@@ -360,11 +361,8 @@ def load(path: Path, what: str = "checkpoint", fix: str = _CHECKPOINT_FIX) -> di
         obj = torch.load(path, map_location="cpu", weights_only=True)
     except InputError:
         raise
-    except FileNotFoundError:
-        raise InputError(path, "", f"{what} not found", "check the path") from None
-    except PermissionError:
-        raise InputError(path, "", f"{what} is not readable (permission denied)",
-                         "check the file's permissions") from None
+    except (FileNotFoundError, PermissionError) as err:
+        raise unreadable(path, what, "check the path", err) from None
     except pickle.UnpicklingError as err:
         if "Weights only load failed" not in str(err):
             raise InputError(path, "", f"{what} is damaged, not a torch file ({_first_line(err)})",
