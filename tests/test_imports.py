@@ -133,3 +133,8 @@ def _top_level_names(path: Path) -> set[str]:
 def test_only_the_backend_imports_libsumo():
     users = sorted(name for name, path in _modules().items() if "libsumo" in _top_level_names(path))
     assert users == ["icrsumo.sim.backend"]
+
+
+def test_only_the_inference_runtime_imports_onnxruntime():
+    users = sorted(name for name, path in _modules().items() if "onnxruntime" in _top_level_names(path))
+    assert users == ["icrsumo.learn.runtime"]

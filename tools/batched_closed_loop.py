@@ -8,7 +8,10 @@ real ``icrsumo evaluate`` episode: SUMO steps, the runner renders the BEV and sc
 episode, and the agent is queried at 10 Hz. Modes (``--modes``, comma-separated):
 
 * ``inprocess-cpu``: ``icrsumo evaluate --agent AGENT --workers N``: each worker process runs
-  the network on its own core with one torch thread (the default; bitwise repeatable);
+  the network on its own core in ONNX Runtime with one thread (the default; bitwise
+  repeatable);
+* ``inprocess-torch``: the same with the network run by torch (one thread), the inference
+  before ONNX Runtime (``benchmarks/torch_runtime.py``);
 * ``inprocess-cuda``: the same with the learned agent built on ``--device`` (evaluate's
   ``agent_device`` option): every worker process holds its own CUDA context and runs batch-1
   forward passes on the shared GPU;
@@ -56,7 +59,7 @@ for p in (ROOT, ROOT / "tools"):
 
 from batched_inference import _get_info, _start_server, _stop_server, fmt, machine, stat  # noqa: E402
 
-MODES = ("inprocess-cpu", "inprocess-cuda", "batched", "unbatched", "ipc", "ipc-unbatched")
+MODES = ("inprocess-cpu", "inprocess-torch", "inprocess-cuda", "batched", "unbatched", "ipc", "ipc-unbatched")
 
 
 def prepare(suite_dir: Path, work: Path, families: tuple[str, ...], k: int) -> Path:
@@ -80,6 +83,11 @@ def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log
     workers = int(n) if n else args.workers
     served = mode in ("batched", "unbatched")
     proc, spec = None, args.agent
+    if mode == "inprocess-torch":
+        import runpy
+
+        torch_rt = ROOT / "benchmarks" / "torch_runtime.py"
+        spec = f"{torch_rt}:{runpy.run_path(str(torch_rt))['TORCH'][args.agent].__name__}"
     if served:
         cfg = {"agent": args.agent, "device": args.device}
         proc, url = _start_server(cfg, args.batch if mode == "batched" else 1, log)

@@ -5,7 +5,7 @@ and process, loaded on first use with ``weights_only=True``) on each observation
 waypoints and target speed to the built-in controller; a stop probability above 0.5 sets the
 target speed to 0. Its only memory is the time it has been stopped
 (:class:`icrsumo.learn.labels.StopClock`). ``act_batch`` runs several episodes' observations in
-one forward pass per checkpoint and device (:func:`act_batch`, used by batched serving). The
+one forward pass per checkpoint, device and runtime (:func:`act_batch`, used by batched serving). The
 inference device is a constructor argument (``device``: cpu by default, cuda, cuda:N, auto).
 
 Shipped checkpoints live in ``icrsumo/learn/checkpoints/<name>.pt`` with a model card
@@ -33,11 +33,11 @@ _FIX = ("give the path of a model.pt written by icrsumo train, or a shipped agen
 
 
 @cache
-def _policy(path: str, device: str):
-    """The process's policy of checkpoint ``path`` on ``device`` (loaded once)."""
+def _policy(path: str, device: str, runtime: str = "onnx"):
+    """The process's policy of checkpoint ``path`` on ``device`` in ``runtime`` (loaded once)."""
     from .nets import Policy
 
-    return Policy(Path(path), device=device)
+    return Policy(Path(path), device=device, runtime=runtime)
 
 
 def checkpoint_path(checkpoint: str | Path) -> Path:
@@ -58,23 +58,29 @@ def checkpoint_path(checkpoint: str | Path) -> Path:
 
 class LearnedAgent:
     """A non-privileged agent around a checkpoint (``checkpoint``: a path) whose network runs
-    on ``device`` (cpu, cuda, cuda:N, auto)."""
+    on ``device`` (cpu, cuda, cuda:N, auto); on the CPU in ``runtime`` ``onnx`` (ONNX Runtime,
+    the default) or ``torch`` (:class:`icrsumo.learn.nets.Policy`)."""
 
     name = "learned"
     privileged = False
     checkpoint: str = ""
 
-    def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu") -> None:
+    def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu",
+                 runtime: str = "onnx") -> None:
         path = checkpoint_path(checkpoint or self.checkpoint)
-        self.path, self.device = str(path), device
-        self.policy = _policy(self.path, device)
+        self.path, self.device, self.runtime = str(path), device, runtime
+        self.policy = _policy(self.path, device, runtime)
         self.clock = StopClock()
 
     def reset(self, info: EpisodeInfo) -> None:
         self.clock = StopClock()
 
     def act(self, obs: Observation) -> Action:
-        return act_batch([self], [obs])[0]
+        # one observation: act_batch without the grouping (the same policy call, bitwise)
+        stopped = self.clock.update(obs.t, obs.speed)
+        out = self.policy(obs.bev[None], [obs.instruction], np.array([obs.speed], dtype=np.float32),
+                          np.array([stopped], dtype=np.float32))
+        return _action(out["waypoints"][0], out["speed"][0], out["stop_prob"][0])
 
     #: batched-inference hook (``act_batch(agents, observations)``) used by serve-agent
     act_batch = staticmethod(lambda agents, batch: act_batch(agents, batch))
@@ -82,23 +88,29 @@ class LearnedAgent:
 
 def act_batch(agents: list[LearnedAgent], batch: list[Observation]) -> list[Action]:
     """Actions of several episodes' agents (``agents[i]`` sees ``batch[i]``) with one forward
-    pass per checkpoint and device: the batched-inference hook of ``icrsumo serve-agent`` and of
+    pass per checkpoint, device and runtime: the batched-inference hook of ``icrsumo serve-agent`` and of
     parallel evaluation. Each agent keeps its own stop clock."""
     actions: list[Action | None] = [None] * len(batch)
-    groups: dict[tuple[str, str], list[int]] = {}
+    groups: dict[tuple[str, str, str], list[int]] = {}
     for i, a in enumerate(agents):
-        groups.setdefault((a.path, a.device), []).append(i)
-    for (path, device), idx in groups.items():
-        policy = _policy(path, device)
+        groups.setdefault((a.path, a.device, a.runtime), []).append(i)
+    for (path, device, runtime), idx in groups.items():
+        policy = _policy(path, device, runtime)
         obs = [batch[i] for i in idx]
         stopped = np.array([agents[i].clock.update(o.t, o.speed) for i, o in zip(idx, obs)], dtype=np.float32)
         out = policy(np.stack([o.bev for o in obs]),
                      [o.instruction for o in obs],
                      np.array([o.speed for o in obs], dtype=np.float32), stopped)
         for i, wps, v, p in zip(idx, out["waypoints"], out["speed"], out["stop_prob"]):
-            target = 0.0 if p > 0.5 else float(max(v, 0.0))
-            actions[i] = Action(waypoints=wps.astype(np.float64), target_speed=target)
+            actions[i] = _action(wps, v, p)
     return actions  # type: ignore[return-value]
+
+
+def _action(wps: np.ndarray, speed: float, stop_prob: float) -> Action:
+    """The action of one output row: waypoints (K, 2) m; target speed 0 when the stop
+    probability is above 0.5, else the predicted speed (m/s, at least 0)."""
+    target = 0.0 if stop_prob > 0.5 else float(max(speed, 0.0))
+    return Action(waypoints=wps.astype(np.float64), target_speed=target)
 
 
 class TokenAgent(LearnedAgent):

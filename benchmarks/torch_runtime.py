@@ -1,0 +1,41 @@
+"""The shipped learned agents with their network run by torch on the CPU instead of ONNX
+Runtime (the inference of icrsumo 0.x before issue 17), for before/after measurements:
+
+    icrsumo evaluate --agent benchmarks/torch_runtime.py:TokenTorch ...
+
+``tools/benchmark.py`` uses them for its ``@torch`` rows and its ``local-2-torch`` ICR run."""
+
+from __future__ import annotations
+
+from icrsumo.learn.agent import NgramAgent, NgramAugAgent, TokenAgent
+
+
+class TokenTorch(TokenAgent):
+    """``bev-token`` with torch inference."""
+
+    name = "bev-token-torch"
+
+    def __init__(self, device: str = "cpu") -> None:
+        super().__init__(device=device, runtime="torch")
+
+
+class NgramTorch(NgramAgent):
+    """``bev-ngram`` with torch inference."""
+
+    name = "bev-ngram-torch"
+
+    def __init__(self, device: str = "cpu") -> None:
+        super().__init__(device=device, runtime="torch")
+
+
+class NgramAugTorch(NgramAugAgent):
+    """``bev-ngram-aug`` with torch inference."""
+
+    name = "bev-ngram-aug-torch"
+
+    def __init__(self, device: str = "cpu") -> None:
+        super().__init__(device=device, runtime="torch")
+
+
+#: agent name -> its class with torch inference
+TORCH = {c.name.removesuffix("-torch"): c for c in (TokenTorch, NgramTorch, NgramAugTorch)}
