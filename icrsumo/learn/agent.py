@@ -93,7 +93,7 @@ def act_batch(agents: list[LearnedAgent], batch: list[Observation]) -> list[Acti
     actions: list[Action | None] = [None] * len(batch)
     groups: dict[tuple[str, str, str], list[int]] = {}
     for i, a in enumerate(agents):
-        groups.setdefault((a.path, a.device, a.runtime), []).append(i)
+        groups.setdefault((a.path, a.device, getattr(a, "runtime", "onnx")), []).append(i)
     for (path, device, runtime), idx in groups.items():
         policy = _policy(path, device, runtime)
         obs = [batch[i] for i in idx]
