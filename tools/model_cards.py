@@ -65,7 +65,9 @@ def card(name: str, summary: dict, train_s: str, eval_cmd: str,
         "vector modulating the 8 x 8 map (FiLM), then a 256-d feature; fusion MLP with the "
         "language vector, speed and stopped time; auxiliary intent head on the language vector.",
         f"- {n_par:,} parameters, {size:.1f} MB (float32), loaded with "
-        "`torch.load(..., weights_only=True)`.", "",
+        "`torch.load(..., weights_only=True)`; on the CPU the network runs in ONNX Runtime, "
+        "exported from these weights in memory (`icrsumo.learn.runtime`); the tables below were "
+        "measured so.", "",
         "## Data and training", "",
         "- Data: `icrsumo collect --out DATA_TRAIN` (the bundled `train` split: 272 routes on "
         "icrsumo's six towns that share no edge sequence with the evaluation splits) and "
