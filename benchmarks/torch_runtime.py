@@ -39,3 +39,8 @@ class NgramAugTorch(NgramAugAgent):
 
 #: agent name -> its class with torch inference
 TORCH = {c.name.removesuffix("-torch"): c for c in (TokenTorch, NgramTorch, NgramAugTorch)}
+
+
+def spec_of(name: str) -> str:
+    """The ``--agent`` spec (``FILE:Class``) of agent ``name`` with torch inference."""
+    return f"{__file__}:{TORCH[name].__name__}"

@@ -452,18 +452,9 @@ def test_scenario_sumo_files_missing_or_hostile(converted_one, tmp_path, capsys)
 
     sc = _copy_scenario(converted_one, tmp_path)
     read_scenario(sc)  # the copy is whole
-    cfg = sc / "scenario.sumocfg"
-    good = cfg.read_text(encoding="utf-8")
-    cfg.write_text(good.replace('value="ego.rou.xml"', 'value="ego.rou.xml,gone.rou.xml"'))
-    with pytest.raises(InputError, match=r"scenario.sumocfg: <route-files>: names 'gone.rou.xml', which"):
-        read_scenario(sc)
-    cfg.write_text(good.replace("<report>", '<output><fcd-output value="/tmp/fcd.xml"/></output><report>'))
-    with pytest.raises(InputError, match=r"scenario.sumocfg: <output>: is not an option a scenario may set"):
-        read_scenario(sc)
-    cfg.write_text(_after_decl(good, COMMENT_20K + DTD.replace("net", "configuration")))
-    with pytest.raises(InputError, match=f"scenario.sumocfg: line 3: SUMO config {BAN}"):
-        read_scenario(sc)
-    for before, after, expect in [
+    cfg, ego = sc / "scenario.sumocfg", sc / "ego.rou.xml"
+    good, ego_text = cfg.read_text(encoding="utf-8"), ego.read_text()
+    option_edits = [
         ('<step-length value="0.05"/>', '<step-length value="fast"/>',
          "<step-length value='fast'>: is not a number"),
         ('<step-length value="0.05"/>', '<step-length value="0.1"/>',
@@ -472,31 +463,32 @@ def test_scenario_sumo_files_missing_or_hostile(converted_one, tmp_path, capsys)
         ('<collision.action value="warn"/>', '<collision.action value="remove"/>', "must be warn"),
         ('<no-warnings value="true"/>', '<no-warnings value="yes"/>', "must be true or false"),
         ('.net.xml"/>', '.net.xml,other.net.xml"/>', "not the manifest's network"),
-    ]:
+    ]
+    for before, _, _ in option_edits:
         assert before in good, before
-        cfg.write_text(good.replace(before, after))
-        with pytest.raises(InputError, match=re.escape(expect)):
+    # (file, its damaged text, the message), each file restored after its case
+    cases = [
+        (cfg, good.replace('value="ego.rou.xml"', 'value="ego.rou.xml,gone.rou.xml"'),
+         r"scenario.sumocfg: <route-files>: names 'gone.rou.xml', which"),
+        (cfg, good.replace("<report>", '<output><fcd-output value="/tmp/fcd.xml"/></output><report>'),
+         r"scenario.sumocfg: <output>: is not an option a scenario may set"),
+        (cfg, _after_decl(good, COMMENT_20K + DTD.replace("net", "configuration")),
+         f"scenario.sumocfg: line 3: SUMO config {BAN}"),
+        *[(cfg, good.replace(before, after), re.escape(expect)) for before, after, expect in option_edits],
+        (ego, ego_text.replace("</routes>", '<edgeData id="d" file="/tmp/x.xml"/></routes>'),
+         r"ego.rou.xml: <edgeData>: is not a demand element"),
+        (ego, ego_text.replace("</routes>", '<vehicle id="v" route="ego_route" depart="1e6"/></routes>'),
+         r"ego.rou.xml: <vehicle id='v' depart='1e6'>: is not a time"),
+        (ego, ego_text[: len(ego_text) // 2], r"ego.rou.xml: line \d+, column \d+: malformed XML"),
+        (ego, _after_decl(ego_text, COMMENT_20K + DTD.replace("net", "routes")),
+         f"ego.rou.xml: line 3: SUMO route file {BAN}"),
+    ]
+    for path, text, pattern in cases:
+        path.write_text(text)
+        with pytest.raises(InputError, match=pattern):
             read_scenario(sc)
-    cfg.write_text(good)
-    veh = sc / "ego.rou.xml"
-    veh_text = veh.read_text()
-    veh.write_text(veh_text.replace("</routes>", '<edgeData id="d" file="/tmp/x.xml"/></routes>'))
-    with pytest.raises(InputError, match=r"ego.rou.xml: <edgeData>: is not a demand element"):
-        read_scenario(sc)
-    veh.write_text(veh_text.replace("</routes>", '<vehicle id="v" route="ego_route" depart="1e6"/></routes>'))
-    with pytest.raises(InputError, match=r"ego.rou.xml: <vehicle id='v' depart='1e6'>: is not a time"):
-        read_scenario(sc)
-    veh.write_text(veh_text[: len(veh_text) // 2])
-    with pytest.raises(InputError, match=r"ego.rou.xml: line \d+, column \d+: malformed XML"):
-        read_scenario(sc)
-    veh.write_text(veh_text)
-    ego = sc / "ego.rou.xml"
-    ego_text = ego.read_text()
-    ego.write_text(_after_decl(ego.read_text(), COMMENT_20K + DTD.replace("net", "routes")))
-    with pytest.raises(InputError, match=f"ego.rou.xml: line 3: SUMO route file {BAN}"):
-        read_scenario(sc)
+        path.write_text(good if path == cfg else ego_text)
     net = sc.parent.parent / "networks" / "icr_arterial.net.xml"
-    ego.write_text(ego_text)
     net.write_text(_after_decl(net.read_text(), COMMENT_20K + DTD))
     with pytest.raises(InputError, match=f"icr_arterial.net.xml: line 3: network file {BAN}"):
         read_scenario(sc)

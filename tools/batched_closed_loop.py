@@ -86,8 +86,7 @@ def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log
     if mode == "inprocess-torch":
         import runpy
 
-        torch_rt = ROOT / "benchmarks" / "torch_runtime.py"
-        spec = f"{torch_rt}:{runpy.run_path(str(torch_rt))['TORCH'][args.agent].__name__}"
+        spec = runpy.run_path(str(ROOT / "benchmarks" / "torch_runtime.py"))["spec_of"](args.agent)
     if served:
         cfg = {"agent": args.agent, "device": args.device}
         proc, url = _start_server(cfg, args.batch if mode == "batched" else 1, log)

@@ -70,6 +70,7 @@ for _v in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import contextlib  # noqa: E402
+import functools  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import platform  # noqa: E402
@@ -106,17 +107,19 @@ TORCH_RUNTIME = Path(__file__).resolve().parents[1] / "benchmarks" / "torch_runt
 TORCH_SUFFIX = "-torch"
 
 
-def _torch_classes() -> dict:
-    """Learned agent name -> its class with torch inference (benchmarks/torch_runtime.py)."""
+@functools.cache
+def _torch_runtime() -> dict:
+    """The namespace of benchmarks/torch_runtime.py (run once): ``TORCH``, learned agent name ->
+    its class with torch inference, and ``spec_of``, its ``--agent`` spec."""
     import runpy
 
-    return runpy.run_path(str(TORCH_RUNTIME))["TORCH"]
+    return runpy.run_path(str(TORCH_RUNTIME))
 
 
 def _make(name: str):
     """A fresh agent: a built-in name, or ``NAME-torch`` for a learned agent run by torch."""
     if name.endswith(TORCH_SUFFIX) and name not in BUILTIN:
-        return _torch_classes()[name.removesuffix(TORCH_SUFFIX)]()
+        return _torch_runtime()["TORCH"][name.removesuffix(TORCH_SUFFIX)]()
     return make_agent(name)
 
 
@@ -529,7 +532,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     repeats = args.repeats or (2 if args.quick else 5)
     n_instr = args.instr_routes or (100 if args.quick else 1000)
-    default_agents = [*BUILTIN] + ([] if args.no_torch or DEFAULT_AGENT not in _torch_classes()
+    default_agents = [*BUILTIN] + ([] if args.no_torch or DEFAULT_AGENT not in _torch_runtime()["TORCH"]
                                    else [DEFAULT_AGENT + TORCH_SUFFIX])
     agents = [a for spec in (args.agents or [",".join(default_agents)]) for a in spec.split(",") if a]
     _set_threads(args.threads)
@@ -570,8 +573,8 @@ def main(argv: list[str] | None = None) -> int:
             if not args.no_ray:
                 configs.append(("ray-2", "ray", 2, ()))
             configs.append(("route-oracle-2", "local", 2, ("route-oracle",)))
-            if not args.no_torch and DEFAULT_AGENT in _torch_classes():
-                spec = f"{TORCH_RUNTIME}:{_torch_classes()[DEFAULT_AGENT].__name__}"
+            if not args.no_torch and DEFAULT_AGENT in _torch_runtime()["TORCH"]:
+                spec = _torch_runtime()["spec_of"](DEFAULT_AGENT)
                 configs.append(("torch-2", "local", 2, (spec,)))
             if args.quick:
                 routes, k = tuple(sc.route_id for sc in map(read_scenario, dirs[:2])), 1

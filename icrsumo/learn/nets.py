@@ -500,7 +500,8 @@ class Policy:
             with torch.inference_mode():
                 ids = torch.from_numpy(self.text.encode_many([text])).to(self.device)
                 self._lang[text] = vec = self.model.lang(ids)[0]
-                self._lang_np[text] = vec[None].cpu().numpy()
+                if self._ort is not None:  # ONNX Runtime's (1, lang) input, made once per text
+                    self._lang_np[text] = vec[None].numpy()
         return torch.stack([self._lang[t] for t in texts])
 
     def __call__(self, bev: np.ndarray, texts: list[str], speed: np.ndarray,
