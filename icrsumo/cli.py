@@ -259,11 +259,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "convert-routes", help="leaderboard route XML -> runnable SUMO scenarios",
         description="Convert a leaderboard-style route file (or a bundled suite: tiny, short, "
-        "long, train, langauto-tiny, langauto-short, langauto-long, carla-train) into SUMO "
+        "long, train, langauto-tiny, langauto-short, langauto-long, carla-train, carla-focus) into "
+        "SUMO "
         "scenarios with background traffic.",
     )
     p.add_argument("routes", help="route XML file, or the name of a bundled suite (tiny, short, long, "
-                                  "train, langauto-tiny, langauto-short, langauto-long, carla-train)")
+                                  "train, langauto-tiny, langauto-short, langauto-long, carla-train, "
+                                  "carla-focus)")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--net", type=Path, help="use this .net.xml for every route")
     p.add_argument("--xodr", type=Path, help="convert this OpenDRIVE file (cached) for every route")
@@ -271,7 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="folder with <town>.net.xml or <town>.xodr per route town")
     p.add_argument("--coords", choices=["sumo", "carla"], default=None,
                    help="waypoint frame: sumo (default) or CARLA's left-handed frame (a bundled "
-                        "suite's own frame by default: carla for langauto-* and carla-train)")
+                        "suite's own frame by default: carla for langauto-* and carla-*)")
     p.add_argument("--traffic", choices=["none", "light", "normal", "dense"], default="normal")
     p.add_argument("--max-snap", type=float, default=10.0,
                    help="farthest a waypoint may lie from a drivable lane (m, default 10)")
@@ -431,13 +433,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser(
         "collect", help="expert driving data (BEV, speed, instruction, expert plan) for training",
-        description="Drive the train split (or carla-train on CARLA's towns; never an evaluation "
+        description="Drive the train split (or carla-train, carla-focus on CARLA's towns; never an "
+        "evaluation "
         "suite) with the route-oracle as expert, with perturbed passes for recovery data; store "
         "bit-packed rasters and labels per episode (resumable).",
     )
     c.add_argument("--out", required=True, help="output folder")
     c.add_argument("--suite", default="train",
-                   help="train (default), carla-train, a route XML or a convert-routes folder")
+                   help="train (default), carla-train, carla-focus, a route XML or a convert-routes folder")
     c.add_argument("--passes", type=int, default=3, help="passes per route; pass 0 clean, others perturbed")
     c.add_argument("--seed", type=int, default=0, help="seed of phrasings and perturbations")
     c.add_argument("--every", type=int, default=2, help="store every n-th agent step (default 2: 5 Hz)")

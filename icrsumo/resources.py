@@ -33,7 +33,7 @@ def bundled_suites() -> dict[str, Path]:
     """Bundled route suite name -> its route XML path: icrsumo's splits (tiny, short, long,
     train: ``routes/``), LangAuto's tracks (langauto-tiny, langauto-short, langauto-long:
     ``routes/langauto/``) and icrsumo's training routes on CARLA's towns (carla-train:
-    ``routes/carla-train/``)."""
+    ``routes/carla-train/``; carla-focus: ``routes/carla-focus/``)."""
     root = data_dir("routes")
     files = sorted(root.glob("*.xml")) + sorted(root.glob("*/*.xml"))
     return {p.stem: p for p in files}

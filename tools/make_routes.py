@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -219,16 +220,18 @@ def make_split(
     split: Split, towns: dict[str, RoadNet], per_town: dict[str, int], rng: np.random.Generator,
     prefix: str, forbidden: set[tuple[str, ...]], *, coords: str = "sumo",
     avoid: tuple[tuple[str, ...], ...] = (), strict: bool = True,
+    accept: Callable[[RoadNet, EgoRoute], bool] | None = None, attempts: int = 4000,
 ) -> tuple[list[RouteSpec], list[EgoRoute]]:
     """Draw ``per_town[town]`` routes of ``split`` in each town (in town order), waypoints in
     frame ``coords``. Draws whose edge sequence is in ``forbidden`` or holds one of ``avoid`` as
-    a contiguous run are rejected. A town that yields fewer routes in 4,000 attempts stops the
-    tool (``strict``) or keeps what it drew (a note is printed)."""
+    a contiguous run, or that ``accept`` (if given) turns down, are rejected. A town that yields
+    fewer routes in ``attempts`` draws stops the tool (``strict``) or keeps what it drew (a note
+    is printed)."""
     specs: list[RouteSpec] = []
     routes: list[EgoRoute] = []
     for town, net in towns.items():
         made = 0
-        for _attempt in range(4000):
+        for _attempt in range(attempts):
             if made == per_town.get(town, 0):
                 break
             walk = _random_walk(net, rng, split)
@@ -242,6 +245,8 @@ def make_split(
             if not (split.min_len <= route.length <= split.max_len) or _turns(route) < split.min_turns:
                 continue
             if route.edges in forbidden or any(contains(route.edges, p) for p in avoid):
+                continue
+            if accept is not None and not accept(net, route):
                 continue
             wps = file_waypoints(net, pts, coords)
             if replan(net, wps, coords) != route.edges:  # the written file must convert back

@@ -45,6 +45,23 @@ def _table(name: str, title: str, summary: dict, eval_cmd: str) -> list[str]:
     return lines + [_row(name, fam, r) for fam, r in res["families"].items()] + [""]
 
 
+#: collect folder name -> what it holds (the command that wrote it and its routes)
+DATA = {
+    "DATA_TRAIN": "`icrsumo collect --out DATA_TRAIN` (the bundled `train` split: 272 routes on icrsumo's "
+                  "six towns that share no edge sequence with the evaluation splits)",
+    "DATA_CARLA": "`icrsumo collect --suite carla-train --out DATA_CARLA` (128 random routes on CARLA's "
+                  "eight towns, none of which drives a whole LangAuto route)",
+    "DATA_FOCUS": "`icrsumo collect --suite carla-focus --out DATA_FOCUS` (92 routes on CARLA's towns, "
+                  "each with a lane change across two lanes or more or a roundabout; none drives a whole "
+                  "LangAuto route)",
+}
+
+
+def _data_line(folders: list[str]) -> str:
+    """The collections a checkpoint was trained on, in words."""
+    return " and ".join(DATA.get(f, f"`{f}`") for f in folders)
+
+
 def card(name: str, summary: dict, train_s: str, eval_cmd: str,
          extra: list[tuple[str, dict, str]] = ()) -> str:
     ck = torch.load(CHECKPOINTS / f"{name}.pt", weights_only=True)
@@ -69,12 +86,9 @@ def card(name: str, summary: dict, train_s: str, eval_cmd: str,
         "exported from these weights in memory (`icrsumo.learn.runtime`); the tables below were "
         "measured so.", "",
         "## Data and training", "",
-        "- Data: `icrsumo collect --out DATA_TRAIN` (the bundled `train` split: 272 routes on "
-        "icrsumo's six towns that share no edge sequence with the evaluation splits) and "
-        "`icrsumo collect --suite carla-train --out DATA_CARLA` (128 routes on CARLA's eight "
-        "towns, none of which drives a whole LangAuto route); 3 passes per route, pass 0 clean and "
+        "- Data: " + _data_line(meta["data"]) + "; 3 passes per route, pass 0 clean and "
         "passes 1-2 with perturbations for recovery; route-oracle expert labels (its final "
-        "standstill dropped where it got stuck); 5 Hz; 1,200 episodes, 457,539 frames. "
+        "standstill dropped where it got stuck); 5 Hz. "
         f"{meta['frames']:,} training frames; the routes with `val_fraction` held out for validation. "
         "Neither LangAuto's evaluation routes nor the evaluation template banks are ever read.",
         "- Instructions: baseline phrasings only (baseline bank)"
@@ -83,9 +97,9 @@ def card(name: str, summary: dict, train_s: str, eval_cmd: str,
            else "") + "; the evaluation banks are never read.",
         f"- Config: [`{name}.toml`]({name}.toml): {meta['steps']:,} steps, batch {cfg['batch']}, "
         f"AdamW, one-cycle lr {cfg['lr']}, seed {cfg['seed']}.",
-        f"- Command: `bash tools/train_shipped.sh OUT DATA_CARLA DATA_TRAIN` (runs `python -m icrsumo "
-        f"train icrsumo/learn/checkpoints/{name}.toml --data DATA_CARLA --data DATA_TRAIN --out "
-        f"OUT/{name}`), on one NVIDIA H100 (the `device` tool), three models at once; {train_s}.",
+        f"- Command: `bash tools/train_shipped.sh OUT {' '.join(meta['data'])}` (runs `python -m icrsumo "
+        f"train icrsumo/learn/checkpoints/{name}.toml {' '.join('--data ' + d for d in meta['data'])} "
+        f"--out OUT/{name}`), on one NVIDIA H100 (the `device` tool), three models at once; {train_s}.",
         f"- Validation at the end: waypoint L1 {val.get('waypoints', float('nan')):.3f} m, last point "
         f"error {val.get('final_wp_err', float('nan')):.2f} m, target-speed L1 "
         f"{val.get('speed', float('nan')):.2f} m/s, stop accuracy {val.get('stop_acc', float('nan')):.3f}, "

@@ -1,5 +1,6 @@
 """``icrsumo collect``: expert driving data for the learned agents, from training routes only
-(the ``train`` split on icrsumo's towns, ``carla-train`` on CARLA's; never an evaluation suite).
+(the ``train`` split on icrsumo's towns, ``carla-train`` and ``carla-focus`` on CARLA's; never an
+evaluation suite).
 
 The expert is the route-oracle (it knows the route). On every agent step (10 Hz) it plans from
 the current state; its plan, resampled at :data:`icrsumo.learn.labels.ARC_M`, and its target
@@ -88,8 +89,8 @@ class CollectOptions:
     def check(self) -> None:
         if self.suite in EVAL_SPLITS or _is_eval_file(self.suite):
             raise InputError("--suite", self.suite, "is an evaluation split",
-                             "collect from the train split (the default), carla-train (CARLA's "
-                             "towns) or your own routes")
+                             "collect from the train split (the default), carla-train or "
+                             "carla-focus (CARLA's towns) or your own routes")
         if not 1 <= self.passes <= 32:
             raise InputError("--passes", "", f"{self.passes} out of range", "use 1 to 32")
         if not 1 <= self.every <= 50:
@@ -340,8 +341,8 @@ def _scenarios(opts: CollectOptions, out: Path) -> Path:
     routes = bundled_suites().get(opts.suite, p)
     if not Path(routes).is_file():
         raise InputError(opts.suite, "", "no such route file or bundled split",
-                         "use train (the default), carla-train or a route XML file")
-    coords = suite_coords(opts.suite) or "sumo"  # a bundled suite knows its frame (carla-train: carla)
+                         "use train (the default), carla-train, carla-focus or a route XML file")
+    coords = suite_coords(opts.suite) or "sumo"  # a bundled suite knows its frame (carla-*: carla)
     report = convert_routes(routes, out / "scenarios", ConvertOptions(
         coords=coords, traffic=opts.traffic, workers=opts.workers))
     for line in report.failures:

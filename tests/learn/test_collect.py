@@ -70,9 +70,10 @@ def test_evaluation_suites_are_refused(tmp_path, split):
 
 
 def test_training_suites_are_accepted():
-    for suite in ("train", "carla-train"):
+    for suite in ("train", "carla-train", "carla-focus"):
         CollectOptions(suite=suite).check()
-    assert suite_coords("carla-train") == "carla"  # converted in CARLA's frame by collect
+    # converted in CARLA's frame by collect
+    assert suite_coords("carla-train") == suite_coords("carla-focus") == "carla"
 
 
 def test_dagger_pass_lets_a_learned_agent_drive(one_route):
