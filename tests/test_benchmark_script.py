@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from icrsumo.agents.registry import DEFAULT_AGENT
+
 pytestmark = pytest.mark.sumo
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -19,8 +21,8 @@ def test_quick_benchmark_prints_a_table_and_a_json_line(tmp_path):
     out = tmp_path / "bench.json"
     proc = subprocess.run(
         [sys.executable, str(ROOT / "tools" / "benchmark.py"), "--quick", "--skip-eval",
-         "--agents", "route-oracle,bev-token,bev-token-torch", "--repeats", "1", "--instr-routes", "20",
-         "--json", str(out)],
+         "--agents", f"route-oracle,{DEFAULT_AGENT},{DEFAULT_AGENT}-torch", "--repeats", "1",
+         "--instr-routes", "20", "--json", str(out)],
         capture_output=True, text=True, timeout=300, cwd=tmp_path,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -29,7 +31,7 @@ def test_quick_benchmark_prints_a_table_and_a_json_line(tmp_path):
     assert res == json.loads(out.read_text())
     assert "| bare SUMO" in proc.stdout and "| route-oracle |" in proc.stdout
     cl = res["closed_loop"]
-    assert set(cl["agents"]) == {"runner-only", "route-oracle", "bev-token", "bev-token-torch"}
+    assert set(cl["agents"]) == {"runner-only", "route-oracle", DEFAULT_AGENT, f"{DEFAULT_AGENT}-torch"}
     assert not cl["errors"]
     assert cl["runner_only_same_trajectory"] is True
     oracle = cl["agents"]["route-oracle"]
@@ -38,9 +40,9 @@ def test_quick_benchmark_prints_a_table_and_a_json_line(tmp_path):
                 "act_ms_per_call", "sim_s_per_wall_s"):
         assert oracle[key]["min"] <= oracle[key]["median"] <= oracle[key]["max"]
     assert res["instructions"]["variant_sets"] == 20 * 32
-    assert "eval" not in res and res["targets"]["default_agent"] == "bev-token"
+    assert "eval" not in res and res["targets"]["default_agent"] == DEFAULT_AGENT
     # the default agent in ONNX Runtime and in torch: the same route, both timed, targets checked
-    for name in ("bev-token", "bev-token-torch"):
+    for name in (DEFAULT_AGENT, f"{DEFAULT_AGENT}-torch"):
         assert cl["agents"][name]["termination"] == "completed"
         assert cl["agents"][name]["act_ms_per_call"]["median"] > 0
     for key in ("act_le_0_3_ms", "sim_rt_ge_100_per_core", "runner_le_0_25_ms_per_step"):

@@ -22,7 +22,6 @@ test as ``carla-train``), nor repeats one of ``carla-train``'s.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -30,13 +29,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from make_carla_routes import TOWNS, langauto_edges  # noqa: E402
+from make_carla_routes import TOWNS, carla_towns, out_folder, write_suite  # noqa: E402
 from make_routes import Split, make_split, replan, summarise  # noqa: E402
 
-from icrsumo.fsio import dumps_json, write_atomic  # noqa: E402
-from icrsumo.networks import RoadNet, load_net  # noqa: E402
-from icrsumo.resources import bundled_suites, bundled_towns  # noqa: E402
-from icrsumo.routes import format_routes, read_routes  # noqa: E402
+from icrsumo.networks import RoadNet  # noqa: E402
+from icrsumo.resources import bundled_suites  # noqa: E402
+from icrsumo.routes import read_routes  # noqa: E402
 from icrsumo.types import EgoRoute, RouteSpec  # noqa: E402
 
 SEED = 9099
@@ -85,16 +83,12 @@ KINDS = {"lanes": multi_lane_change, "roundabout": roundabout}
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path,
-                    default=Path(__file__).resolve().parent.parent / "routes" / SUITE)
-    args = ap.parse_args()
-    towns = {t: load_net(bundled_towns()[t]) for t in TOWNS}
-    avoid = langauto_edges(towns)
+    out = out_folder(__doc__, SUITE)
+    towns, avoid = carla_towns()
     used: set[tuple[str, ...]] = set(avoid)
-    specs_train, errors = read_routes(bundled_suites()["carla-train"])
+    train, errors = read_routes(bundled_suites()["carla-train"])
     assert not errors, errors
-    used.update(replan(towns[s.town], s.waypoints, "carla") for s in specs_train)
+    used.update(replan(towns[s.town], s.waypoints, "carla") for s in train)
     rng = np.random.default_rng(SEED)
     specs: list[RouteSpec] = []
     routes: list[EgoRoute] = []
@@ -106,9 +100,7 @@ def main() -> None:
         specs += got
         routes += drawn
     print(summarise(SUITE, routes))
-    write_atomic(args.out / f"{SUITE}.xml", format_routes(specs))
-    write_atomic(args.out / "suite.json", dumps_json(SUITE_JSON))
-    write_atomic(args.out / "README.md", README)
+    write_suite(out, SUITE, specs, SUITE_JSON, README)
 
 
 if __name__ == "__main__":

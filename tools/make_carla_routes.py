@@ -99,13 +99,30 @@ def per_town_table(specs: list[RouteSpec], routes: list[EgoRoute]) -> str:
     return "\n".join(lines)
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def out_folder(doc: str, suite: str) -> Path:
+    """The ``--out`` folder of a route tool (default ``routes/<suite>``)."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
     ap.add_argument("--out", type=Path,
-                    default=Path(__file__).resolve().parent.parent / "routes" / SUITE)
-    args = ap.parse_args()
+                    default=Path(__file__).resolve().parent.parent / "routes" / suite)
+    return ap.parse_args().out
+
+
+def carla_towns() -> tuple[dict[str, RoadNet], tuple[tuple[str, ...], ...]]:
+    """CARLA's eight towns and the edge sequences of LangAuto's routes on them."""
     towns = {t: load_net(bundled_towns()[t]) for t in TOWNS}
-    avoid = langauto_edges(towns)
+    return towns, langauto_edges(towns)
+
+
+def write_suite(out: Path, suite: str, specs: list[RouteSpec], meta: dict, readme: str) -> None:
+    """A bundled suite folder: ``<suite>.xml``, ``suite.json`` and ``README.md``."""
+    write_atomic(out / f"{suite}.xml", format_routes(specs))
+    write_atomic(out / "suite.json", dumps_json(meta))
+    write_atomic(out / "README.md", readme)
+
+
+def main() -> None:
+    out = out_folder(__doc__, SUITE)
+    towns, avoid = carla_towns()
     used: set[tuple[str, ...]] = set(avoid)
     rng = np.random.default_rng(SEED)
     specs: list[RouteSpec] = []
@@ -119,9 +136,7 @@ def main() -> None:
         routes += drawn
     print(summarise(SUITE, routes))
     print(per_town_table(specs, routes))
-    write_atomic(args.out / f"{SUITE}.xml", format_routes(specs))
-    write_atomic(args.out / "suite.json", dumps_json(SUITE_JSON))
-    write_atomic(args.out / "README.md", README)
+    write_suite(out, SUITE, specs, SUITE_JSON, README)
 
 
 if __name__ == "__main__":

@@ -48,12 +48,13 @@ def _table(name: str, title: str, summary: dict, eval_cmd: str) -> list[str]:
 #: collect folder name -> what it holds (the command that wrote it and its routes)
 DATA = {
     "DATA_TRAIN": "`icrsumo collect --out DATA_TRAIN` (the bundled `train` split: 272 routes on icrsumo's "
-                  "six towns that share no edge sequence with the evaluation splits)",
+                  "six towns that share no edge sequence with the evaluation splits; 816 episodes, "
+                  "269,762 frames)",
     "DATA_CARLA": "`icrsumo collect --suite carla-train --out DATA_CARLA` (128 random routes on CARLA's "
-                  "eight towns, none of which drives a whole LangAuto route)",
+                  "eight towns, none of which drives a whole LangAuto route; 384 episodes, 193,567 frames)",
     "DATA_FOCUS": "`icrsumo collect --suite carla-focus --out DATA_FOCUS` (92 routes on CARLA's towns, "
                   "each with a lane change across two lanes or more or a roundabout; none drives a whole "
-                  "LangAuto route)",
+                  "LangAuto route; 276 episodes, 117,553 frames)",
 }
 
 
