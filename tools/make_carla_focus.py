@@ -39,9 +39,9 @@ from icrsumo.types import EgoRoute, RouteSpec  # noqa: E402
 
 SEED = 9099
 SUITE = "carla-focus"
-#: routes per town and kind (lane changes across >= 2 lanes; roundabout passages). Towns whose
-#: roads hold neither (measured: no route of 20,000 draws in Town01, 02, 03 (lanes), 05
-#: (roundabout), 07 or 10HD) are left out.
+#: routes per town and kind (lane changes across >= 2 lanes; roundabout passages). Town01, 02, 07
+#: and 10HD have no edge with three passenger lanes, none of 20,000 draws in Town03 needed such a
+#: change, and only Town03's network has a roundabout.
 PER_TOWN = {
     "lanes": {"Town04": 24, "Town05": 12, "Town06": 32},
     "roundabout": {"Town03": 24},
