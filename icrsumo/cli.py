@@ -260,8 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
         "convert-routes", help="leaderboard route XML -> runnable SUMO scenarios",
         description="Convert a leaderboard-style route file (or a bundled suite: tiny, short, "
         "long, train, langauto-tiny, langauto-short, langauto-long, carla-train, carla-focus) into "
-        "SUMO "
-        "scenarios with background traffic.",
+        "SUMO scenarios with background traffic.",
     )
     p.add_argument("routes", help="route XML file, or the name of a bundled suite (tiny, short, long, "
                                   "train, langauto-tiny, langauto-short, langauto-long, carla-train, "
@@ -434,8 +433,7 @@ def build_parser() -> argparse.ArgumentParser:
     c = sub.add_parser(
         "collect", help="expert driving data (BEV, speed, instruction, expert plan) for training",
         description="Drive the train split (or carla-train, carla-focus on CARLA's towns; never an "
-        "evaluation "
-        "suite) with the route-oracle as expert, with perturbed passes for recovery data; store "
+        "evaluation suite) with the route-oracle as expert, with perturbed passes for recovery data; store "
         "bit-packed rasters and labels per episode (resumable).",
     )
     c.add_argument("--out", required=True, help="output folder")

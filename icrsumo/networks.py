@@ -300,6 +300,10 @@ class RoadNet:
         return out
 
     # ----------------------------------------------------------------- graph
+    def enters_roundabout(self, from_edge: str, to_edge: str) -> bool:
+        """Whether the junction from ``from_edge`` to ``to_edge`` enters a roundabout."""
+        return to_edge in self.roundabout_edges and from_edge not in self.roundabout_edges
+
     def via_length(self, from_edge: str, to_edge: str) -> float:
         """Shortest junction-internal length (m) between two connected edges."""
         return min(c.via_length for c in self.connections[(from_edge, to_edge)])

@@ -101,6 +101,11 @@ class LaneChange:
     def direction(self) -> str:
         return "left" if self.to_lane > self.from_lane else "right"
 
+    @property
+    def lanes(self) -> int:
+        """How many lanes the change crosses."""
+        return abs(self.to_lane - self.from_lane)
+
 
 @dataclass(frozen=True)
 class EgoRoute:

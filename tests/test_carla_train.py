@@ -84,8 +84,7 @@ def test_carla_training_splits_convert_and_never_drive_a_langauto_route(tmp_path
             elif cls == "lanes":
                 assert max(abs(c["to_lane"] - c["from_lane"]) for c in sc.manifest["lane_changes"]) >= 2
             else:
-                ring = net.roundabout_edges
-                assert any(j["to_edge"] in ring and j["from_edge"] not in ring
+                assert any(net.enters_roundabout(j["from_edge"], j["to_edge"])
                            for j in sc.manifest["junctions"]), sc.route_id
         return {sc.route_id: tuple(sc.ego_edges) for sc in scs}
 

@@ -70,13 +70,12 @@ never for evaluation.
 
 def multi_lane_change(net: RoadNet, route: EgoRoute) -> bool:
     """The route needs a lane change across two lanes or more."""
-    return any(abs(c.to_lane - c.from_lane) >= 2 for c in route.lane_changes)
+    return any(c.lanes >= 2 for c in route.lane_changes)
 
 
 def roundabout(net: RoadNet, route: EgoRoute) -> bool:
     """The route enters a roundabout."""
-    ring = net.roundabout_edges
-    return any(j.to_edge in ring and j.from_edge not in ring for j in route.junctions)
+    return any(net.enters_roundabout(j.from_edge, j.to_edge) for j in route.junctions)
 
 
 KINDS = {"lanes": multi_lane_change, "roundabout": roundabout}

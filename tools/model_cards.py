@@ -63,11 +63,15 @@ def _data_line(folders: list[str]) -> str:
     return " and ".join(DATA.get(f, f"`{f}`") for f in folders)
 
 
-def card(name: str, summary: dict, train_s: str, eval_cmd: str,
+def card(name: str, summary: dict, train_s: float | None, eval_cmd: str,
          extra: list[tuple[str, dict, str]] = ()) -> str:
+    """The model card of shipped checkpoint ``name``; ``train_s``: its training wall time (s),
+    by default the one its metadata records."""
     ck = torch.load(CHECKPOINTS / f"{name}.pt", weights_only=True)
     cfg = tomllib.loads((CHECKPOINTS / f"{name}.toml").read_text())
     meta = ck["meta"]
+    train_s = train_s if train_s is not None else meta.get("final", {}).get("elapsed_s")
+    took = f"{train_s / 60:.1f} min" if train_s is not None else "time not recorded"
     n_par = sum(v.numel() for v in ck["model"].values())
     size = (CHECKPOINTS / f"{name}.pt").stat().st_size / 2**20
     val = meta.get("final", {}).get("val", {})
@@ -100,7 +104,7 @@ def card(name: str, summary: dict, train_s: str, eval_cmd: str,
         f"AdamW, one-cycle lr {cfg['lr']}, seed {cfg['seed']}.",
         f"- Command: `bash tools/train_shipped.sh OUT {' '.join(meta['data'])}` (runs `python -m icrsumo "
         f"train icrsumo/learn/checkpoints/{name}.toml {' '.join('--data ' + d for d in meta['data'])} "
-        f"--out OUT/{name}`), on one NVIDIA H100 (the `device` tool), three models at once; {train_s}.",
+        f"--out OUT/{name}`), on one NVIDIA H100 (the `device` tool), three models at once; {took}.",
         f"- Validation at the end: waypoint L1 {val.get('waypoints', float('nan')):.3f} m, last point "
         f"error {val.get('final_wp_err', float('nan')):.2f} m, target-speed L1 "
         f"{val.get('speed', float('nan')):.2f} m/s, stop accuracy {val.get('stop_acc', float('nan')):.3f}, "
@@ -115,7 +119,8 @@ def card(name: str, summary: dict, train_s: str, eval_cmd: str,
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("summary", type=Path)
-    ap.add_argument("--train-seconds", action="append", default=[], help="NAME=SECONDS")
+    ap.add_argument("--train-seconds", action="append", default=[],
+                    help="NAME=SECONDS (default: the training time in the checkpoint's metadata)")
     ap.add_argument("--eval-command", default="icrsumo evaluate --agent NAME")
     ap.add_argument("--extra", action="append", default=[], help="LABEL=SUMMARY.json=COMMAND")
     args = ap.parse_args()
@@ -124,10 +129,10 @@ def main() -> None:
         label, path, cmd = item.split("=", 2)
         extra.append((label, json.loads(Path(path).read_text()), cmd))
     summary = json.loads(args.summary.read_text())
-    secs = dict(s.split("=", 1) for s in args.train_seconds)
+    secs = {k: float(v) for k, v in (s.split("=", 1) for s in args.train_seconds)}
     for p in sorted(CHECKPOINTS.glob("*.pt")):
-        t = f"{float(secs[p.stem]) / 60:.1f} min" if p.stem in secs else "time not recorded"
-        (CHECKPOINTS / f"{p.stem}.md").write_text(card(p.stem, summary, t, args.eval_command, extra))
+        card_text = card(p.stem, summary, secs.get(p.stem), args.eval_command, extra)
+        (CHECKPOINTS / f"{p.stem}.md").write_text(card_text)
         print(f"wrote {CHECKPOINTS / (p.stem + '.md')}")
 
 

@@ -64,7 +64,7 @@ def extract_maneuvers(scenario: Scenario, net: RoadNet) -> list[Maneuver]:
     while i < len(junctions):
         j = junctions[i]
         ring = net.roundabout_edges
-        if j["to_edge"] in ring and j["from_edge"] not in ring:
+        if net.enters_roundabout(j["from_edge"], j["to_edge"]):
             # entering a roundabout: count the exits passed up to the one taken
             exit_no, k = 0, i + 1
             while k < len(junctions) and junctions[k]["from_edge"] in ring:
