@@ -3,11 +3,10 @@ same networks): extra training routes on CARLA's towns that each hold one of the
 ``carla-train`` split has too few of for the learned agents to drive LangAuto's long routes.
 
 ``carla-train`` draws routes at random; a maneuver rare on random routes is rare in its data.
-Its 128 routes hold 13 lane changes across two lanes or more (most of them with 100 m or more to
-do them in) and pass a roundabout 10 times, and the learned agents trained on it fail exactly
-there (README, *LangAuto: the learned agents*). This split draws routes the same way
-(:func:`make_routes.make_split`, the same random walks and key waypoints) and keeps only the
-draws that hold
+Its 128 routes hold 13 lane changes across two lanes or more and pass a roundabout 10 times,
+and the learned agents trained on it fail exactly there (README, *LangAuto: the learned
+agents*). This split draws routes the same way (:func:`make_routes.make_split`, the same random
+walks and key waypoints) and keeps only the draws that hold
 
 - a lane change across two lanes or more (``lane changes``), or
 - a roundabout passage (``roundabout``),
