@@ -66,7 +66,8 @@ def evaluate(suite: str | Path = "tiny", agents: str | Sequence[str] | None = No
     ray), ``address``, ``traffic``, ``rollout_route``, ``agent_timeout`` (s, None: no limit),
     ``batch_inference`` (a device), ``max_batch``, ``inference_processes``, ``agent_device``,
     ``baseline_bank`` (LMDrive's instruction dictionary: LangAuto's own baseline wording, part
-    of the folder's configuration).
+    of the folder's configuration), ``scoring`` (``lb1``: CARLA Leaderboard 1.0's rules, part of
+    the folder's configuration).
 
     Returns an :class:`icrsumo.evaluation.EvalResult`: ``summary`` (OUT/summary.json),
     ``out``, the episode counts and the batched-inference statistics. Raises

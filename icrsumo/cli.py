@@ -11,6 +11,7 @@ from typing import NoReturn
 
 from . import __version__
 from .errors import InputError
+from .metrics import DEFAULT_SCORING, scoring_names
 from .vocab import Family
 
 
@@ -157,7 +158,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         traffic=args.traffic, rollout_route=args.rollout_route, agent_timeout=args.agent_timeout or None,
         batch_inference=args.batch_inference, max_batch=args.max_batch,
         inference_processes=args.inference_processes, baseline_bank=args.baseline_bank,
-        retry_crashed=args.retry_crashed,
+        retry_crashed=args.retry_crashed, scoring=args.scoring,
     )
     again = " (stored as crashed: rerun with --retry-crashed to run them again)" if result.crashed else ""
     print(f"{result.done} episodes done, {result.crashed} crashed{again}, {time.perf_counter() - t0:.0f} s "
@@ -186,7 +187,7 @@ def _cmd_attack(args: argparse.Namespace) -> int:
 def _cmd_report(args: argparse.Namespace) -> int:
     from .evaluation import report_only
 
-    report_only(Path(args.out), quiet=args.quiet)
+    report_only(Path(args.out), quiet=args.quiet, scoring=args.scoring)
     return 0
 
 
@@ -366,6 +367,8 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--agent-timeout", type=float, default=60.0, metavar="S",
                    help="seconds an agent's reset/act call may take before the episode is stored as "
                    "crashed (default 60; 0: no limit)")
+    v.add_argument("--scoring", choices=scoring_names(), default=DEFAULT_SCORING,
+                   help=f"scoring rules (default {DEFAULT_SCORING}: CARLA Leaderboard 1.0's, rule by rule)")
     v.add_argument("--retry-crashed", action="store_true",
                    help="run the episodes stored as crashed again (after a transient fault: a remote "
                    "server that was down, a wrong device)")
@@ -399,6 +402,9 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("report", help="rebuild summary, tables and figures of an evaluation folder")
     r.add_argument("out", help="the --out folder of icrsumo evaluate")
     r.add_argument("--quiet", action="store_true")
+    r.add_argument("--scoring", choices=scoring_names(), default=None,
+                   help="rescore every stored episode from its log by these rules (default: report the "
+                   "stored scores)")
     r.set_defaults(func=_cmd_report)
 
     ca = sub.add_parser(

@@ -22,10 +22,11 @@ Reward per step, in route-completion points (the Driving Score's units, 0-100)::
     r = (RC_t - RC_{t-1})                                   progress: sums to the episode's RC
         - sum over new penalised infractions of 100 (1 - f)  f: Leaderboard factor (pedestrian 0.50,
                                                              vehicle 0.60, static 0.65, red light
-                                                             0.70, stop sign 0.80), de-duplicated
-                                                             as in scoring
-        - 100 * d_outside / L                                d_outside: m driven this step outside
-                                                             the route's lanes; L: route length (m)
+                                                             0.70, stop sign 0.80), counted as in
+                                                             scoring
+        - 100 * d_outside / L                                d_outside: route advance (m) made this
+                                                             step off the driving lanes or against
+                                                             the traffic; L: route length (m)
 
 ``terminated`` when the episode ends as completed or route deviation (termination classes
 done / RD); ``truncated`` when it ends in a TO class (route timeout, agent blocked, stuck,
@@ -45,7 +46,6 @@ closes the first one's simulation (stepping it then raises). For parallel enviro
 
 from __future__ import annotations
 
-import math
 import string
 import weakref
 from pathlib import Path
@@ -60,15 +60,31 @@ from .cache import DEFAULT_ROUTE, DEFAULT_SUITE, bundled_route
 from .dynamics import Control, VehicleParams
 from .errors import InputError
 from .instructions.store import read_instruction_sets
-from .metrics import PENALTIES, penalised_infractions, score_episode
+from .metrics import PENALTIES, CollisionCounter, score_episode
 from .render import to_rgb
 from .scenario import Scenario, read_scenario
+from .sim.callbacks import EpisodeCallback, StepRecord
 from .sim.episode import Episode, RunOptions
-from .termination import is_route_complete
 from .types import InstructionSet
-from .vocab import Termination, TerminationClass
+from .vocab import EventKind, TerminationClass
 
 ENV_ID = "icrsumo/ICRDrive-v0"
+
+
+class _Penalties(EpisodeCallback):
+    """The penalised event infractions of an episode as they happen (``kinds``, in order): the
+    collisions :class:`~icrsumo.metrics.CollisionCounter` counts (on the positions the log
+    stores), every red light and stop sign."""
+
+    def __init__(self) -> None:
+        self.counter = CollisionCounter()
+        self.kinds: list[EventKind] = []
+
+    def on_step(self, episode: Episode, step: StepRecord) -> None:
+        x, y = round(step.x, 2) + 0.0, round(step.y, 2) + 0.0
+        self.kinds += [EventKind(e.kind) for e in self.counter.step(step.t, x, y, step.events)]
+        self.kinds += [EventKind(e.kind) for e in step.events
+                       if e.kind in (EventKind.RED_LIGHT, EventKind.STOP_SIGN)]
 ACTION_TYPES = ("control", "waypoints")
 TEXT_SPACES = ("text", "bytes")
 #: bound of the waypoint action box (m, ego frame)
@@ -186,11 +202,8 @@ class ICRDriveEnv(gym.Env):
         return Action(waypoints=a)
 
     def _rc(self) -> float:
-        ep = self._episode
-        total = ep.route.total
-        if (ep.done and ep.termination == Termination.COMPLETED) or is_route_complete(ep.progress, total):
-            return 100.0
-        return min(100.0, max(0.0, 100.0 * ep.progress / total)) if total > 0 else 0.0
+        mon = self._episode.monitor
+        return mon.completion_pct if mon is not None else 0.0
 
     def _close_episode(self) -> None:
         global _live
@@ -217,16 +230,17 @@ class ICRDriveEnv(gym.Env):
         if other is not None and other is not self:
             other._suspend()
         self._suspended = False
-        self._episode = Episode(self.scenario, iset, self.opts)
+        self._penalties = _Penalties()
+        self._episode = Episode(self.scenario, iset, self.opts, callbacks=(self._penalties,))
         _live = weakref.ref(self)
         obs = self._episode.start()
         if obs is None:  # ended before the first decision: the simulator failed
             raise RuntimeError(f"the simulation of {self.scenario.route_id} failed at its start: "
                                f"{self._episode.message or self._episode.termination}")
         self._obs = obs
-        self._rc_prev, self._n_inf, self._n_steps = self._rc(), 0, self._episode.recorder.steps
+        self._rc_prev, self._n_inf, self._out_prev = self._rc(), 0, 0.0
         info = {"route_id": self.scenario.route_id, "town": self.scenario.town, "family": iset.family,
-                "k": iset.k, "route_length": self._episode.route.total,
+                "k": iset.k, "route_length": self._episode.route.length,
                 "control_dt": self._episode.info.control_dt, "t": obs.t, "instruction_id": obs.instruction_id}
         return self._observe(obs), info
 
@@ -246,17 +260,16 @@ class ICRDriveEnv(gym.Env):
         rc = self._rc()
         reward = rc - self._rc_prev
         self._rc_prev = rc
-        infractions = penalised_infractions(ep.recorder.events)
-        for inf in infractions[self._n_inf:]:
-            reward -= 100.0 * (1.0 - PENALTIES[inf.kind])
+        infractions = self._penalties.kinds
+        for kind in infractions[self._n_inf:]:
+            reward -= 100.0 * (1.0 - PENALTIES[kind])
         self._n_inf = len(infractions)
-        cols, n = ep.recorder.cols, ep.recorder.steps
-        d_out = math.fsum(math.hypot(cols["x"][i] - cols["x"][i - 1], cols["y"][i] - cols["y"][i - 1])
-                          for i in range(max(self._n_steps, 1), n) if cols["outside"][i] == 1)
-        self._n_steps = n
-        if ep.route.total > 0:
-            reward -= 100.0 * d_out / ep.route.total
-        info: dict[str, Any] = {"t": cols["t"][-1], "progress": ep.progress, "route_length": ep.route.total,
+        out_m = ep.monitor.outside_m
+        if ep.route.length > 0:
+            reward -= 100.0 * (out_m - self._out_prev) / ep.route.length
+        self._out_prev = out_m
+        cols = ep.recorder.cols
+        info: dict[str, Any] = {"t": cols["t"][-1], "progress": ep.progress, "route_length": ep.route.length,
                                 "instruction_id": cols["instruction"][-1],
                                 "infractions_so_far": len(infractions)}
         terminated = truncated = False

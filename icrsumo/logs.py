@@ -4,13 +4,17 @@ A log is stored as::
 
     {"version": 1, "route_id": ..., "agent": ..., "family": ..., "k": ..., "seed": ...,
      "step_length": ..., "route_length": ..., "termination": ..., "termination_t": ...,
-     "message": ..., "steps": {"t": [...], "x": [...], ...}, "events": [[kind, t, pos, other, x, y], ...]}
+     "message": ..., "route": [[x, y], ...], "steps": {"t": [...], "x": [...], ...},
+     "events": [[kind, t, pos, other, x, y], ...]}
 
 Keys come in that fixed order, per-step values are columns, and floats are rounded (t and
-termination_t to 1e-3 s, x/y/progress/route_dist/pos/route_length to 0.01 m, yaw to 1e-4 rad,
+termination_t to 1e-3 s, x/y/progress/route_dist/pos/route_length/route to 0.01 m, yaw to 1e-4 rad,
 speed to 1e-3 m/s, step_length to 1e-6 s), so the same episode always gives the same bytes and
-already-rounded logs round-trip exactly. Malformed input raises
-:class:`~icrsumo.errors.InputError` naming the key.
+already-rounded logs round-trip exactly. Version 2 holds what the leaderboard's rules need to
+rescore the episode (:mod:`icrsumo.termination`, :mod:`icrsumo.metrics`): the route polyline,
+the OutsideRouteLanesTest bits per step and a contact event per step of contact; version 1 logs
+cannot be rescored and are refused. Malformed input raises :class:`~icrsumo.errors.InputError`
+naming the key.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ from icrsumo.fsio import dumps_json, read_text, write_atomic
 from icrsumo.types import TERMINATIONS, EpisodeLog, EpisodeResult, Event, Infraction, TerminationClass
 from icrsumo.vocab import EventKind, Family, Termination
 
-LOG_VERSION = 1
+LOG_VERSION = 2
 
 #: per-step column -> decimals (None: integer column)
 STEP_COLUMNS: dict[str, int | None] = {
@@ -44,7 +48,10 @@ STEP_COLUMNS: dict[str, int | None] = {
 EVENT_FIELDS: dict[str, int | None] = {"kind": None, "t": 3, "pos": 2, "other": None, "x": 2, "y": 2}
 
 _HEADER = ("version", "route_id", "agent", "family", "k", "seed", "step_length", "route_length",
-           "termination", "termination_t", "message", "steps", "events")
+           "termination", "termination_t", "message", "route", "steps", "events")
+
+#: largest value of the per-step ``outside`` bits (OFF_LANES | WRONG_LANE)
+_OUTSIDE_MAX = 3
 
 _DEFAULT_SOURCE = "<episode log>"
 
@@ -86,6 +93,7 @@ def log_to_dict(log: EpisodeLog) -> dict[str, Any]:
         "termination": log.termination,
         "termination_t": _r(log.termination_t, 3, "termination_t"),
         "message": log.message,
+        "route": [[_r(x, 2, f"route[{i}]"), _r(y, 2, f"route[{i}]")] for i, (x, y) in enumerate(log.route)],
         "steps": steps,
         "events": events,
     }
@@ -148,8 +156,9 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
                       f"allowed keys: {', '.join(_HEADER)}")
     version = rd.integer(rd.get(d, "version"), "version")
     if version != LOG_VERSION:
-        raise rd.fail("version", f"unsupported episode log version {short(version)}",
-                      f"expected {LOG_VERSION}")
+        fix = (f"expected {LOG_VERSION}; logs of version 1 predate the leaderboard's scoring rules "
+               "and cannot be rescored: run the episodes again with this icrsumo into a new --out folder")
+        raise rd.fail("version", f"unsupported episode log version {short(version)}", fix)
     termination = rd.choice(rd.get(d, "termination"), Termination, "termination", "termination")
     step_length = rd.number(rd.get(d, "step_length"), "step_length")
     if step_length <= 0:
@@ -185,8 +194,16 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
             raise rd.fail(f"steps.progress[{i}]", "progress decreased",
                           "progress is the furthest route position reached, so it never decreases")
     for i, v in enumerate(cols["outside"]):
-        if v not in (0, 1):
-            raise rd.fail(f"steps.outside[{i}]", f"expected 0 or 1, got {short(v)}")
+        if not 0 <= v <= _OUTSIDE_MAX:
+            raise rd.fail(f"steps.outside[{i}]", f"expected 0 to {_OUTSIDE_MAX}, got {short(v)}")
+    raw_route = rd.get(d, "route")
+    if not isinstance(raw_route, list) or (n and not raw_route):
+        raise rd.fail("route", "expected a non-empty list of [x, y] points")
+    route = []
+    for i, p in enumerate(raw_route):
+        if not isinstance(p, list) or len(p) != 2:
+            raise rd.fail(f"route[{i}]", f"expected [x, y], got {short(p)}")
+        route.append((rd.number(p[0], f"route[{i}][0]"), rd.number(p[1], f"route[{i}][1]")))
 
     raw_events = rd.get(d, "events")
     if not isinstance(raw_events, list):
@@ -226,6 +243,7 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
         termination=termination,
         termination_t=rd.number(rd.get(d, "termination_t"), "termination_t"),
         message=rd.string(d.get("message", ""), "message"),
+        route=tuple(route),
     )
 
 

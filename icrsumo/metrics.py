@@ -1,20 +1,32 @@
-"""Leaderboard 1.0 scoring of one recorded episode: RC, IS, DS. Pure: no SUMO.
+"""Leaderboard scoring of one recorded episode: RC, IS, DS. Pure: no SUMO.
 
-RC (0-100) is the furthest route progress as a percentage of the route length, 100 once the
-route counts as complete (see :func:`icrsumo.termination.is_route_complete`). IS (0-1) is the
-product of one factor per penalised infraction (:data:`PENALTIES`) times
-``1 - outside_lanes_pct / 100``. DS = RC * IS.
+Leaderboard 1.0 (``lb1``, the default) reproduces ``leaderboard/utils/statistics_manager.py``
+(``compute_route_statistics``, branch ``leaderboard-1.0``) over the criteria of scenario_runner's
+``atomic_criteria.py`` (branch ``leaderboard-1.0``), replayed from the log
+(:func:`icrsumo.termination.run_monitor`):
+
+* RC (0-100): ``RouteCompletionTest``'s percentage, 100 when the route was completed;
+* IS (0-1): the product of one factor per counted infraction (:data:`PENALTIES`: collision
+  with a pedestrian 0.50, a vehicle 0.60, the static layout 0.65, red light 0.70, stop sign
+  0.80), times ``1 - pct / 100`` for ``OutsideRouteLanesTest``'s percentage when the ego made
+  route progress off the driving lanes or in a lane of the opposite direction;
+* DS = RC x IS.
+
+Collisions are counted as ``CollisionTest`` counts them (:func:`counted_collisions`).
+:data:`SCORINGS` is the registry of scoring rules (a name is registered once).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
-from icrsumo.termination import EPS, is_route_complete
+from icrsumo.termination import EPS, events_by_step, run_monitor
 from icrsumo.types import TERMINATIONS, EpisodeLog, EpisodeResult, Event, Infraction
 from icrsumo.vocab import EventKind, Termination
 
-#: IS factor of each penalised event kind (Leaderboard 1.0)
+#: IS factor of each penalised event kind (statistics_manager.py: PENALTY_*)
 PENALTIES: dict[EventKind, float] = {
     EventKind.COLLISION_PEDESTRIAN: 0.50,
     EventKind.COLLISION_VEHICLE: 0.60,
@@ -29,100 +41,149 @@ NON_PENALISED: tuple[EventKind, ...] = tuple(k for k in EventKind if k not in PE
 #: Every event kind an :class:`~icrsumo.types.EpisodeLog` may hold.
 EVENT_KINDS: frozenset[EventKind] = frozenset(EventKind)
 
-#: Collision events of one kind less than this many seconds apart are one collision when the
-#: actor is unknown (static layout, or a vehicle/pedestrian event without ``other``).
-COLLISION_RUN_GAP_S = 5.0
+#: CollisionTest: a contact within this distance (m) of a counted one's place is not counted ...
+MIN_AREA_OF_COLLISION = 3.0
+#: ... and places are forgotten once the ego is farther than this (m) from them
+MAX_AREA_OF_COLLISION = 5.0
+#: CollisionTest: the last counted actor is remembered this long (s); static layout never is
+MAX_ID_TIME = 5.0
 
-_ACTOR_COLLISIONS = (EventKind.COLLISION_VEHICLE, EventKind.COLLISION_PEDESTRIAN)
-
-
-def route_completion(log: EpisodeLog) -> float:
-    """RC in [0, 100], unrounded: 0 without steps; 100 when the log says completed or the
-    furthest progress is >= 99 % of the route or within 10 m of its end."""
-    if not log.progress:
-        return 0.0
-    best = max(log.progress)
-    if log.termination == Termination.COMPLETED or is_route_complete(best, log.route_length):
-        return 100.0
-    if log.route_length <= 0:  # unreachable: a route of length <= 10 m is always complete
-        return 0.0
-    return min(100.0, max(0.0, 100.0 * best / log.route_length))
+COLLISIONS = (EventKind.COLLISION_VEHICLE, EventKind.COLLISION_PEDESTRIAN, EventKind.COLLISION_STATIC)
 
 
-def step_distances(log: EpisodeLog) -> list[float]:
-    """Distance (m) driven on each step: from the previous step's position (0 for the first)."""
-    d = [0.0] * len(log.x)
-    for i in range(1, len(log.x)):
-        d[i] = math.hypot(log.x[i] - log.x[i - 1], log.y[i] - log.y[i - 1])
-    return d
+class CollisionCounter:
+    """Leaderboard 1.0's ``CollisionTest``, step by step: :meth:`step` takes one step's time (s),
+    ego centre (m) and events, and returns the collisions counted there.
+
+    The log holds one event per step of contact. Per step, in order: each contact is ignored
+    when it is with the same actor as the last counted collision (vehicles and pedestrians,
+    by ``other``; the static layout has no identity) or when the ego is within 3 m of a place
+    where a collision was counted; otherwise it is counted there. Then places farther than
+    5 m from the ego are forgotten, and the last actor once more than 5 s passed since the last
+    counted collision."""
+
+    def __init__(self) -> None:
+        self.places: list[tuple[float, float]] = []
+        self.last_id: str | None = None
+        self.last_t = 0.0
+
+    def step(self, t: float, x: float, y: float, events: Sequence[Event]) -> list[Event]:
+        out: list[Event] = []
+        for e in events:
+            if e.kind not in COLLISIONS:
+                continue
+            actor = e.other if e.kind != EventKind.COLLISION_STATIC else ""
+            if actor and actor == self.last_id:
+                continue
+            if any(math.sqrt((x - px) ** 2 + (y - py) ** 2) <= MIN_AREA_OF_COLLISION
+                   for px, py in self.places):
+                continue
+            out.append(e)
+            self.last_t = t
+            self.places.append((x, y))
+            if actor:
+                self.last_id = actor
+        self.places = [(px, py) for px, py in self.places
+                       if math.sqrt((x - px) ** 2 + (y - py) ** 2) <= MAX_AREA_OF_COLLISION]
+        if self.last_id is not None and t - self.last_t > MAX_ID_TIME + EPS:
+            self.last_id = None
+        return out
 
 
-def outside_lanes_pct(log: EpisodeLog) -> float:
-    """Percentage (0-100, unrounded) of the distance driven on steps with ``outside == 1``;
-    0 when the ego did not move. Sums are exact (math.fsum) so results do not depend on order."""
-    d = step_distances(log)
-    total = math.fsum(d)
-    if total <= 0.0:
-        return 0.0
-    out = math.fsum(di for di, o in zip(d, log.outside) if o == 1)
-    return min(100.0, max(0.0, 100.0 * out / total))
+def counted_collisions(log: EpisodeLog) -> list[Event]:
+    """The collision events of ``log`` that :class:`CollisionCounter` counts, step by step (the
+    positions are the ego centre of each step)."""
+    by_step, _ = events_by_step(log)
+    counter = CollisionCounter()
+    out: list[Event] = []
+    for i, evs in enumerate(by_step):
+        if evs:
+            out += counter.step(log.t[i], log.x[i], log.y[i], evs)
+        elif counter.places or counter.last_id is not None:
+            counter.step(log.t[i], log.x[i], log.y[i], ())
+    return out
 
 
-def penalised_infractions(events: tuple[Event, ...] | list[Event]) -> tuple[Infraction, ...]:
-    """The penalised infractions among ``events``, in time order, after de-duplication.
-
-    collision_vehicle / collision_pedestrian: once per ``other`` actor id per episode (SUMO
-    repeats a contact on every step of overlap). collision_static, and actor collisions with
-    an empty ``other``: once per run of events less than 5 s apart. red_light and stop_sign:
-    every event (the sensors emit one per junction entry). Unknown kinds raise ValueError.
-    """
-    seen_actors: set[tuple[str, str]] = set()
-    last_anon: dict[str, float] = {}
-    out: list[Infraction] = []
-    for e in sorted(events, key=lambda ev: ev.t):
+def penalised_infractions(log: EpisodeLog) -> tuple[Infraction, ...]:
+    """The penalised event infractions of ``log`` in time order: the collisions
+    :func:`counted_collisions` counts, and every red-light and stop-sign event (the sensors
+    emit one per junction entry). Unknown event kinds raise ValueError."""
+    for e in log.events:
         if e.kind not in EVENT_KINDS:
             raise ValueError(f"unknown event kind {e.kind!r} at t={e.t} (known: {sorted(EVENT_KINDS)})")
-        if e.kind not in PENALTIES:
-            continue
-        if e.kind in _ACTOR_COLLISIONS and e.other:
-            key = (e.kind, e.other)
-            if key in seen_actors:
-                continue
-            seen_actors.add(key)
-        elif e.kind in _ACTOR_COLLISIONS or e.kind == EventKind.COLLISION_STATIC:
-            prev = last_anon.get(e.kind)
-            last_anon[e.kind] = e.t
-            if prev is not None and e.t - prev < COLLISION_RUN_GAP_S - EPS:
-                continue
-        out.append(Infraction(kind=EventKind(e.kind), factor=PENALTIES[e.kind], t=e.t, pos=e.pos,
-                              other=e.other))
-    return tuple(out)
+    chosen = counted_collisions(log) + [e for e in log.events
+                                        if e.kind in (EventKind.RED_LIGHT, EventKind.STOP_SIGN)]
+    return tuple(Infraction(kind=EventKind(e.kind), factor=PENALTIES[e.kind], t=e.t, pos=e.pos, other=e.other)
+                 for e in sorted(chosen, key=lambda ev: ev.t))
 
 
-def score_episode(log: EpisodeLog) -> EpisodeResult:
-    """Leaderboard 1.0 scores of one episode. RC and DS are rounded to 4 decimals, IS to 6,
-    outside_lanes_pct to 4 and duration to 3, so results are stable across platforms."""
+def _score_lb1(log: EpisodeLog) -> EpisodeResult:
+    mon, _ = run_monitor(log)
+    rc = mon.completion_pct if mon is not None else 0.0
+    pct = mon.outside_pct if mon is not None else 0.0
+    infractions = list(penalised_infractions(log))
+    if mon is not None and mon.outside_m > 0:
+        end_t = log.t[-1]
+        infractions.append(Infraction(EventKind.OUTSIDE_ROUTE_LANES, 1.0 - pct / 100.0, end_t, mon.progress,
+                                      f"{mon.outside_m:.3f} m"))
+    return _result(log, rc, pct, tuple(infractions))
+
+
+def _result(log: EpisodeLog, rc: float, pct: float, infractions: tuple[Infraction, ...]) -> EpisodeResult:
+    """RC and DS rounded to 4 decimals, IS to 6, outside_lanes_pct to 4 and duration to 3, so
+    results are stable across platforms."""
     if log.termination not in TERMINATIONS:
         raise ValueError(f"unknown termination {log.termination!r} (known: {sorted(TERMINATIONS)})")
-    rc = route_completion(log)
-    infractions = penalised_infractions(log.events)
-    pct = outside_lanes_pct(log)
     is_ = 1.0
     for inf in infractions:
         is_ *= inf.factor
-    is_ *= 1.0 - pct / 100.0
     duration = log.t[-1] - log.t[0] if len(log.t) >= 2 else 0.0
     return EpisodeResult(
-        route_id=log.route_id,
-        agent=log.agent,
-        family=log.family,
-        k=log.k,
-        rc=round(rc, 4) + 0.0,
-        is_=round(is_, 6) + 0.0,
-        ds=round(rc * is_, 4) + 0.0,
-        termination=Termination(log.termination),
-        termination_class=TERMINATIONS[log.termination],
-        infractions=infractions,
-        outside_lanes_pct=round(pct, 4) + 0.0,
-        duration=round(duration, 3) + 0.0,
+        route_id=log.route_id, agent=log.agent, family=log.family, k=log.k,
+        rc=round(rc, 4) + 0.0, is_=round(is_, 6) + 0.0, ds=round(rc * is_, 4) + 0.0,
+        termination=Termination(log.termination), termination_class=TERMINATIONS[log.termination],
+        infractions=infractions, outside_lanes_pct=round(pct, 4) + 0.0, duration=round(duration, 3) + 0.0,
     )
+
+
+@dataclass(frozen=True)
+class Scoring:
+    """One scoring rule set: ``name`` (``--scoring``), what it reproduces, and ``score``
+    (an :class:`EpisodeLog` -> its :class:`EpisodeResult`)."""
+
+    name: str
+    title: str
+    score: Callable[[EpisodeLog], EpisodeResult]
+
+
+#: name -> scoring (:func:`register_scoring` refuses a name twice)
+SCORINGS: dict[str, Scoring] = {}
+
+#: the default scoring
+DEFAULT_SCORING = "lb1"
+
+
+def register_scoring(scoring: Scoring) -> Scoring:
+    """Add ``scoring`` to :data:`SCORINGS`; ValueError when its name is taken."""
+    if scoring.name in SCORINGS:
+        raise ValueError(f"scoring {scoring.name!r} is registered already")
+    SCORINGS[scoring.name] = scoring
+    return scoring
+
+
+register_scoring(Scoring("lb1", "CARLA Leaderboard 1.0 (branch leaderboard-1.0: statistics_manager.py, "
+                                "atomic_criteria.py)", _score_lb1))
+
+
+def scoring_names() -> Sequence[str]:
+    """The registered scoring names, default first."""
+    return [DEFAULT_SCORING] + sorted(n for n in SCORINGS if n != DEFAULT_SCORING)
+
+
+def score_episode(log: EpisodeLog, scoring: str = DEFAULT_SCORING) -> EpisodeResult:
+    """The scores of one episode under ``scoring`` (a name of :data:`SCORINGS`)."""
+    try:
+        rule = SCORINGS[scoring]
+    except KeyError:
+        raise ValueError(f"unknown scoring {scoring!r} (known: {', '.join(scoring_names())})") from None
+    return rule.score(log)

@@ -433,16 +433,14 @@ def _lb_record(r: EpisodeRecord, index: int) -> dict:
         status = "Failed - Agent crashed" if "agent" in r.message.lower() else "Failed - Simulation crashed"
     else:
         status, key, msg = _LB_TERMINATION.get(r.termination, (f"Failed - {r.termination}", None, ""))
-        prod = 1.0
         for kind, factor in r.infractions:
+            if kind == EventKind.OUTSIDE_ROUTE_LANES:
+                infr["outside_route_lanes"].append(
+                    f"Agent went outside its route lanes for about {100.0 * (1.0 - factor):.2f}% of the "
+                    "completed route")
+                continue
             lb_key, text = _LB_KIND.get(kind, ("collisions_layout", f"Agent infraction {kind}"))
             infr[lb_key].append(f"{text} (penalty {factor:.2f})")
-            prod *= factor
-        # IS = product of factors x (1 - outside %): recover the off-route share
-        if prod > 0 and r.is_ < prod * (1.0 - 1e-6):
-            pct = 100.0 * (1.0 - r.is_ / prod)
-            infr["outside_route_lanes"].append(
-                f"Agent went outside its route lanes for about {pct:.3f}% of the completed route")
         if key is not None:
             infr[key].append(msg)
     return {
@@ -451,30 +449,39 @@ def _lb_record(r: EpisodeRecord, index: int) -> dict:
         "status": status,
         "infractions": infr,
         "scores": {"score_route": r.rc, "score_penalty": r.is_, "score_composed": r.ds},
-        "meta": {"route_length": r.length, "duration_game": r.duration, "duration_system": 0.0},
+        "meta": {"route_length": r.length, "duration_game": r.duration, "duration_system": -1},
     }
 
 
 def leaderboard_checkpoint(records: Iterable[EpisodeRecord], agent: str, family: str) -> dict:
     """The episodes of one agent and family as a CARLA Leaderboard 1.0 checkpoint (``result.json``).
 
-    Records are sorted by (route_id, k, seed); crashed episodes appear as failed records and in
-    ``global_record.meta.exceptions`` (as every non-completed route does in the leaderboard) but
-    are left out of the global means and infraction rates, like every ICR-Drive mean. Global
-    infractions are counts per km over the total route length of the non-crashed episodes.
-    """
+    Reproduces ``leaderboard/utils/statistics_manager.py`` (branch ``leaderboard-1.0``,
+    ``compute_global_statistics`` and ``save_global_record``): records sorted by (route_id, k,
+    seed); the global scores are means over *every* record, crashed ones included (their scores
+    are 0), with the sample standard deviation; each infraction rate is the sum over records of
+    the record's count / max(RC / 100 x route km, 0.001); every record that is not 'Completed' is
+    in ``meta.exceptions``. ``entry_status``: 'Crashed' (not eligible) when an episode's simulation
+    crashed, else 'Finished with agent errors' when any record's status names the agent (as
+    the leaderboard's substring test does: deviations, timeouts and blocks included), else
+    'Finished'. The global ``meta`` also holds ``total_length`` (m) and ``duration_game`` (s),
+    summed, and ``duration_system`` -1 (icrsumo does not time episodes by wall clock; -1 is the
+    leaderboard's value for a duration it was not given)."""
     mine = sorted((r for r in records if r.agent == agent and r.family == family),
                   key=lambda r: (r.route_id, r.k, r.seed))
     recs = [_lb_record(r, i) for i, r in enumerate(mine)]
-    ok = [(r, rec) for r, rec in zip(mine, recs) if r.status != EpisodeStatus.CRASHED]
-    km = max(sum(r.length for r, _ in ok) / 1000.0, 0.001)
-    n = len(ok)
-    infr = {k: round(sum(len(rec["infractions"][k]) for _, rec in ok) / km, 6) for k in LB_INFRACTIONS}
+    n = len(recs)
+    infr = {k: 0.0 for k in LB_INFRACTIONS}
+    for r, rec in zip(mine, recs):
+        km = max(r.rc / 100.0 * r.length / 1000.0, 0.001)
+        for k in LB_INFRACTIONS:
+            infr[k] += len(rec["infractions"][k]) / km
+    infr = {k: round(v, 6) for k, v in infr.items()}
     scores = {"score_route": 0.0, "score_penalty": 0.0, "score_composed": 0.0}
     std: dict[str, Any] = {k: "NaN" for k in scores}
     if n:
-        cols = {"score_route": [r.rc for r, _ in ok], "score_penalty": [r.is_ for r, _ in ok],
-                "score_composed": [r.ds for r, _ in ok]}
+        cols = {"score_route": [r.rc for r in mine], "score_penalty": [r.is_ for r in mine],
+                "score_composed": [r.ds for r in mine]}
         scores = {k: round(float(np.mean(v)), 6) for k, v in cols.items()}
         if n > 1:
             std = {k: round(float(np.std(v, ddof=1)), 6) for k, v in cols.items()}
@@ -486,7 +493,8 @@ def leaderboard_checkpoint(records: Iterable[EpisodeRecord], agent: str, family:
         "status": "Failed" if exceptions else "Completed",
         "infractions": infr,
         "scores": scores,
-        "meta": {"exceptions": exceptions},
+        "meta": {"exceptions": exceptions, "total_length": round(sum(r.length for r in mine), 2),
+                 "duration_game": round(sum(r.duration for r in mine), 3), "duration_system": -1},
         "scores_std_dev": std,
     }
     values = [f"{scores['score_composed']:.3f}", f"{scores['score_route']:.3f}",
@@ -494,10 +502,17 @@ def leaderboard_checkpoint(records: Iterable[EpisodeRecord], agent: str, family:
         f"{infr[k]:.3f}" for k in ("collisions_pedestrian", "collisions_vehicle", "collisions_layout",
                                    "red_light", "stop_infraction", "outside_route_lanes", "route_dev",
                                    "route_timeout", "vehicle_blocked")]
+    statuses = [rec["status"] for rec in recs]
+    if "Failed - Simulation crashed" in statuses:
+        entry, eligible = "Crashed", False
+    elif any("Agent" in st for st in statuses):
+        entry, eligible = "Finished with agent errors", True
+    else:
+        entry, eligible = "Finished", True
     return {
-        "_checkpoint": {"global_record": global_record, "progress": [len(recs), len(recs)], "records": recs},
-        "entry_status": "Finished",
-        "eligible": True,
+        "_checkpoint": {"global_record": global_record, "progress": [n, n], "records": recs},
+        "entry_status": entry,
+        "eligible": eligible,
         "sensors": [],
         "values": values,
         "labels": list(_LB_LABELS),

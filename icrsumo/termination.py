@@ -1,9 +1,33 @@
-"""Run-ending rules of Leaderboard 1.0 as a pure, incremental monitor.
+"""The route criteria of CARLA Leaderboard 1.0 as a pure, incremental monitor.
 
-The closed loop (:mod:`icrsumo.sim.episode`) calls :meth:`TerminationMonitor.update` once per
-simulation step; :func:`replay` runs the same monitor over a recorded
-:class:`~icrsumo.types.EpisodeLog`, so a log can be checked against the rules that ended it.
-No SUMO here.
+Reproduces, rule by rule, scenario_runner's ``srunner/scenariomanager/scenarioatomics/
+atomic_criteria.py`` (branch ``leaderboard-1.0``) as the leaderboard's
+``leaderboard/scenarios/route_scenario.py`` builds them for a route:
+
+* the dense route (:class:`DenseRoute`): the route interpolated at a 1 m hop
+  (``interpolate_trajectory(..., hop_resolution=1.0)``), distances between consecutive points
+  as straight lines;
+* ``RouteCompletionTest``: the percentage of the dense route passed (a point is passed when the
+  ego is ahead of it along the route's direction there; 3 points are tried per tick), complete
+  once that percentage is above 99 *and* the ego is less than 10 m (straight line) from the
+  last route point;
+* ``InRouteTest``: route deviation when the nearest of the next 6 dense points is 30 m or more
+  away, or when the route advanced while the ego was 15 m or more from it exceeds 30 % of the
+  route;
+* ``OutsideRouteLanesTest``'s bookkeeping (the next 3 points are tried per tick, each one
+  passed adding its straight-line distance from the last): the route advance made on ticks where the ego was
+  off every driving lane or in a lane of the opposite direction, over all route advance (the
+  lane facts themselves come from the sensors, :mod:`icrsumo.sim.lanes`, as the per-step
+  ``outside`` flags of the log);
+* ``ActorSpeedAboveThresholdTest`` (agent blocked): more than 180 s since the last tick at or
+  above 0.1 m/s;
+* the route timeout (``RouteScenario._estimate_route_timeout``): ``int(0.8 s/m x dense route
+  length + 5 s)``, reached once more than that much simulated time has elapsed (``TimeOut``).
+
+The closed loop (:mod:`icrsumo.sim.episode`) feeds :class:`TerminationMonitor` one step at a
+time with the values the episode log stores (rounded as :mod:`icrsumo.logs` rounds them);
+:func:`replay` runs the same monitor over a recorded :class:`~icrsumo.types.EpisodeLog`, so a
+stored log is rescored to the same numbers and the same termination. No SUMO here.
 """
 
 from __future__ import annotations
@@ -11,18 +35,41 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 from icrsumo.types import EpisodeLog, Event
 from icrsumo.vocab import EventKind, Termination
 
+#: hop (m) of the dense route (leaderboard: ``interpolate_trajectory(hop_resolution=1.0)``)
+HOP_M = 1.0
+#: RouteCompletionTest.WINDOWS_SIZE: points tried per tick beyond the current one
+COMPLETION_WINDOW = 2
+#: RouteCompletionTest: complete above this percentage ...
+COMPLETION_PCT = 99.0
+#: ... and closer than this (m, straight line) to the last route point
+COMPLETION_RADIUS_M = 10.0
+#: InRouteTest.WINDOWS_SIZE, offroad_max (m), offroad_min (m) and MAX_ROUTE_PERCENTAGE (%)
+IN_ROUTE_WINDOW = 5
 DEVIATION_M = 30.0
+SAFE_M = 15.0
+MAX_OUT_ROUTE_PCT = 30.0
+#: OutsideRouteLanesTest.WINDOWS_SIZE
+LANES_WINDOW = 3
+#: ActorSpeedAboveThresholdTest as the route scenario builds it: 0.1 m/s, 180 s
 BLOCKED_SPEED = 0.1
 BLOCKED_S = 180.0
-COMPLETION_FRACTION = 0.99
-COMPLETION_RADIUS_M = 10.0
+#: route_scenario.py: SECONDS_GIVEN_PER_METERS, INITIAL_SECONDS_DELAY
+SECONDS_PER_M = 0.8
+INITIAL_DELAY_S = 5.0
 
-#: Tolerance of the comparisons below (s and m). Logged values are rounded to 1e-3 s and
-#: 0.01 m, so this only absorbs float noise such as 0.1 * 1800 != 180.0.
+#: bits of the per-step ``outside`` flag (OutsideRouteLanesTest): off every driving lane by more
+#: than lane width / 2 + 1.3 m ...
+OFF_LANES = 1
+#: ... or in a lane of the opposite direction (outside junctions)
+WRONG_LANE = 2
+
+#: Tolerance (s) of the time comparisons: logged times are rounded to 1e-3 s, so this only
+#: absorbs float noise such as 0.05 * 3600 != 180.0.
 EPS = 1e-6
 
 #: events that end a run by themselves -> termination kind (checked in this order)
@@ -30,78 +77,214 @@ ENDING_EVENTS: dict[EventKind, Termination] = {EventKind.SIM_ERROR: Termination.
                                                EventKind.EGO_TELEPORT: Termination.STUCK}
 
 
+@dataclass(frozen=True)
+class DenseRoute:
+    """The route as the leaderboard's criteria see it: points (m) every :data:`HOP_M` m of arc
+    along the route polyline and its last point, the unit direction of the route at each
+    point, and ``accum`` (m): straight-line distance summed from the first point (so
+    ``accum[-1]`` is the route length the criteria use)."""
+
+    x: tuple[float, ...]
+    y: tuple[float, ...]
+    fx: tuple[float, ...]
+    fy: tuple[float, ...]
+    accum: tuple[float, ...]
+
+    @classmethod
+    def from_polyline(cls, polyline: Sequence[Sequence[float]]) -> DenseRoute:
+        """The dense route of a polyline ((N, 2) m, N >= 1; repeated points are skipped)."""
+        pts: list[tuple[float, float]] = []
+        for p in polyline:
+            q = (float(p[0]), float(p[1]))
+            if not (math.isfinite(q[0]) and math.isfinite(q[1])):
+                raise ValueError(f"route point {p!r} is not finite")
+            if not pts or q != pts[-1]:
+                pts.append(q)
+        if not pts:
+            raise ValueError("the route has no points")
+        segs = [(a, b, math.hypot(b[0] - a[0], b[1] - a[1])) for a, b in zip(pts, pts[1:])]
+        xs, ys, fxs, fys = [], [], [], []
+        total = math.fsum(s[2] for s in segs)
+        n_hops = int(math.floor(total / HOP_M + 1e-9))
+        targets = [k * HOP_M for k in range(n_hops + 1)]
+        if total - targets[-1] > 1e-6:
+            targets.append(total)
+        k, start = 0, 0.0
+        for s in targets:
+            while k < len(segs) - 1 and start + segs[k][2] <= s:
+                start += segs[k][2]
+                k += 1
+            if segs:
+                (ax, ay), (bx, by), ln = segs[k]
+                u = min(max((s - start) / ln, 0.0), 1.0) if ln > 0 else 0.0
+                xs.append(ax + (bx - ax) * u)
+                ys.append(ay + (by - ay) * u)
+                fxs.append((bx - ax) / ln if ln > 0 else 1.0)
+                fys.append((by - ay) / ln if ln > 0 else 0.0)
+            else:
+                xs.append(pts[0][0])
+                ys.append(pts[0][1])
+                fxs.append(1.0)
+                fys.append(0.0)
+        accum = [0.0]
+        for i in range(1, len(xs)):
+            accum.append(accum[-1] + math.hypot(xs[i] - xs[i - 1], ys[i] - ys[i - 1]))
+        return cls(tuple(xs), tuple(ys), tuple(fxs), tuple(fys), tuple(accum))
+
+    @property
+    def length(self) -> float:
+        """Route length (m) as the criteria measure it: ``accum[-1]``."""
+        return self.accum[-1]
+
+    def passed(self, i: int, x: float, y: float) -> bool:
+        """Whether (x, y) is ahead of point ``i`` along the route's direction there (dot > 0)."""
+        return (x - self.x[i]) * self.fx[i] + (y - self.y[i]) * self.fy[i] > 0.0
+
+
 def route_timeout(route_length: float) -> float:
-    """Time budget (s) of a route: 0.8 s per metre plus 5 s."""
-    return 0.8 * route_length + 5.0
-
-
-def is_route_complete(progress: float, route_length: float) -> bool:
-    """True when ``progress`` (m) counts as having finished the route: at least 99 % of its
-    length, or within 10 m of its end. Shared by the monitor and by RC scoring."""
-    return (progress >= COMPLETION_FRACTION * route_length - EPS
-            or route_length - progress <= COMPLETION_RADIUS_M + EPS)
+    """Time budget (s) of a route of ``route_length`` m (the dense route's):
+    ``int(0.8 * length + 5)``, truncated to whole seconds as the leaderboard does."""
+    return float(int(SECONDS_PER_M * route_length + INITIAL_DELAY_S))
 
 
 class TerminationMonitor:
-    """Decides, step by step, whether and why an episode ends.
+    """Decides, step by step, whether and why an episode ends, and keeps the leaderboard's route
+    bookkeeping (RC, route advance off the lanes).
 
-    ``start_t`` is the simulation time from which the route timeout runs (the time of the
-    first logged step: :func:`replay` uses ``log.t[0]``). Once a kind has been returned the
-    monitor is finished and every later :meth:`update` returns the same kind.
+    Per step, :meth:`locate` (the ego centre, m) then :meth:`update` (time s, speed m/s, the
+    ``outside`` flags of :data:`OFF_LANES` / :data:`WRONG_LANE`, the step's events).
+    ``start_t`` is the simulation time from which the route timeout runs (the first logged
+    step's: :func:`replay` uses ``log.t[0]``). Once a kind has been returned the monitor is
+    finished and every later :meth:`update` returns the same kind.
     """
 
-    def __init__(self, route_length: float, start_t: float) -> None:
-        if not math.isfinite(route_length) or route_length < 0:
-            raise ValueError(f"route_length must be finite and >= 0, got {route_length!r}")
+    def __init__(self, route: DenseRoute, start_t: float) -> None:
         if not math.isfinite(start_t):
             raise ValueError(f"start_t must be finite, got {start_t!r}")
-        self.route_length = float(route_length)
+        self.route = route
         self.start_t = float(start_t)
-        self.timeout = route_timeout(self.route_length)
-        self.slow_since: float | None = None
+        self.timeout = route_timeout(route.length)
         self.result: tuple[Termination, float] | None = None
         self._last_t: float | None = None
+        self._last_valid: float | None = None  # ActorSpeedAboveThresholdTest._time_last_valid_state
+        self.completion_index = 0                # RouteCompletionTest._current_index
+        self.completed = False
+        self._x = self._y = math.nan
+        # InRouteTest
+        self.in_route_index = 0
+        self.route_dist = 0.0
+        self._in_safe = True
+        self._out_route_m = 0.0
+        self._deviated = False
+        # OutsideRouteLanesTest
+        self.lanes_index = 0
+        self.driven_m = 0.0
+        self.outside_m = 0.0
+
+    # ------------------------------------------------------------------ readings
+    @property
+    def progress(self) -> float:
+        """Route progress (m): ``accum`` of the last dense point passed (monotone)."""
+        return self.route.accum[self.completion_index]
+
+    @property
+    def completion_pct(self) -> float:
+        """RouteCompletionTest's percentage (0-100); 100 once the route is complete."""
+        if self.completed:
+            return 100.0
+        total = self.route.length
+        return 100.0 * self.route.accum[self.completion_index] / total if total > 0 else 0.0
+
+    @property
+    def outside_pct(self) -> float:
+        """OutsideRouteLanesTest's percentage (0-100): route advance made off the lanes over all
+        route advance made; 0 while none was made off the lanes."""
+        return 100.0 * self.outside_m / self.driven_m if self.outside_m > 0 else 0.0
 
     def blocked_for(self, t: float) -> float:
-        """Seconds the ego has been continuously slow at time ``t`` (0 when it is moving)."""
-        return 0.0 if self.slow_since is None else t - self.slow_since
+        """Seconds since the last step at or above 0.1 m/s (0 before the first step)."""
+        return 0.0 if self._last_valid is None else t - self._last_valid
 
-    def update(self, t: float, progress: float, route_dist: float, speed: float,
+    # ------------------------------------------------------------------ per step
+    def locate(self, x: float, y: float) -> float:
+        """Advance the route trackers to the ego centre (x, y) m; the route progress (m)."""
+        if self.result is not None:
+            return self.progress
+        r, n = self.route, len(self.route.x)
+        self._x, self._y = x, y
+        # RouteCompletionTest: every point of the window the ego is ahead of moves the index
+        cur = self.completion_index
+        for i in range(cur, min(cur + COMPLETION_WINDOW + 1, n)):
+            if r.passed(i, x, y):
+                self.completion_index = i
+        if not self.completed:
+            self.completed = (100.0 * r.accum[self.completion_index] / r.length > COMPLETION_PCT
+                              if r.length > 0 else True) and \
+                math.hypot(x - r.x[-1], y - r.y[-1]) < COMPLETION_RADIUS_M
+        # InRouteTest: the nearest of the next points (the last of equals), its advance
+        cur = self.in_route_index
+        best, closest = math.inf, -1
+        for i in range(cur, min(cur + IN_ROUTE_WINDOW + 1, n)):
+            d = math.sqrt((x - r.x[i]) ** 2 + (y - r.y[i]) ** 2)
+            if d <= best:
+                closest, best = i, d
+        self.route_dist = best
+        off_route = True
+        if best < DEVIATION_M:
+            off_route = False
+            self._in_safe = best < SAFE_M
+        if closest != cur:
+            if not self._in_safe:
+                self._out_route_m += r.accum[closest] - r.accum[cur]
+                if r.length > 0 and 100.0 * self._out_route_m / r.length > MAX_OUT_ROUTE_PCT:
+                    off_route = True
+            self.in_route_index = closest
+        self._deviated = self._deviated or off_route
+        return self.progress
+
+    def update(self, t: float, speed: float, outside: int = 0,
                events: Sequence[Event] = ()) -> Termination | None:
-        """Termination kind at this step or None.
+        """Termination kind at this step (after :meth:`locate`) or None.
 
-        Order of checks: a sim_error event, an ego_teleport event ('stuck'), completed
-        (progress >= 0.99 L or L - progress <= 10 m), route_deviation (route_dist > 30 m),
-        agent_blocked (speed < 0.1 m/s continuously for >= 180 s of simulated time, measured
-        from the first slow step), route_timeout (t - start_t > 0.8 L + 5 s).
-        """
+        Order of checks: a sim_error event, an ego_teleport event ('stuck'), completed,
+        route_deviation, agent_blocked, route_timeout (elapsed > the budget)."""
         if self.result is not None:
             return self.result[0]
         if self._last_t is not None and t < self._last_t:
             raise ValueError(f"time went backwards: {t} after {self._last_t}")
         self._last_t = t
-        if speed < BLOCKED_SPEED:
-            if self.slow_since is None:
-                self.slow_since = t
+        blocked = False
+        if speed < BLOCKED_SPEED and self._last_valid is not None:
+            blocked = t - self._last_valid > BLOCKED_S + EPS
         else:
-            self.slow_since = None
-        kind = self._check(t, progress, route_dist, events)
+            self._last_valid = t
+        # OutsideRouteLanesTest: each point of the window passed adds its advance from the last
+        r, cur = self.route, self.lanes_index
+        if not math.isnan(self._x):
+            for i in range(cur + 1, min(cur + LANES_WINDOW + 1, len(r.x))):
+                if r.passed(i, self._x, self._y):
+                    j = self.lanes_index
+                    gain = math.hypot(r.x[i] - r.x[j], r.y[i] - r.y[j])
+                    self.lanes_index = i
+                    self.driven_m += gain
+                    if outside:
+                        self.outside_m += gain
+        kind = self._check(t, events, blocked)
         if kind is not None:
             self.result = (kind, t)
         return kind
 
-    def _check(self, t: float, progress: float, route_dist: float,
-               events: Sequence[Event]) -> Termination | None:
+    def _check(self, t: float, events: Sequence[Event], blocked: bool) -> Termination | None:
         if events:
             kinds = {e.kind for e in events}
             for event_kind, kind in ENDING_EVENTS.items():
                 if event_kind in kinds:
                     return kind
-        if is_route_complete(progress, self.route_length):
+        if self.completed:
             return Termination.COMPLETED
-        if route_dist > DEVIATION_M + EPS:
+        if self._deviated:
             return Termination.ROUTE_DEVIATION
-        if self.slow_since is not None and t - self.slow_since >= BLOCKED_S - EPS:
+        if blocked:
             return Termination.AGENT_BLOCKED
         if t - self.start_t > self.timeout + EPS:
             return Termination.ROUTE_TIMEOUT
@@ -132,22 +315,34 @@ def events_by_step(log: EpisodeLog) -> tuple[list[list[Event]], list[Event]]:
     return out, trailing
 
 
-def replay(log: EpisodeLog) -> tuple[Termination, float] | None:
-    """Run the monitor over the log's columns (events attached to the step with the same t,
-    within half a step) and return the first ``(kind, t)``, or None if no rule fired.
+def dense_route(log: EpisodeLog) -> DenseRoute:
+    """The dense route of the log's route polyline (ValueError when the log has none)."""
+    if not log.route:
+        raise ValueError("the episode log holds no route polyline")
+    return DenseRoute.from_polyline(log.route)
 
-    If no rule fired on the steps, the earliest sim_error / ego_teleport event after the last
-    step ends the run at that event's time (sim_error first on a tie)."""
+
+def run_monitor(log: EpisodeLog) -> tuple[TerminationMonitor | None, tuple[Termination, float] | None]:
+    """The monitor run over the log's steps (None without steps) and the first ``(kind, t)`` it
+    decided, or, when no rule fired on the steps, the earliest sim_error / ego_teleport event
+    after the last step (sim_error first on a tie), or None."""
     by_step, trailing = events_by_step(log)
+    mon = None
     if log.t:
-        mon = TerminationMonitor(log.route_length, log.t[0])
+        mon = TerminationMonitor(dense_route(log), log.t[0])
         for i, evs in enumerate(by_step):
-            kind = mon.update(log.t[i], log.progress[i], log.route_dist[i], log.speed[i], evs)
+            mon.locate(log.x[i], log.y[i])
+            kind = mon.update(log.t[i], log.speed[i], log.outside[i], evs)
             if kind is not None:
-                return kind, log.t[i]
+                return mon, (kind, log.t[i])
     ending = [e for e in trailing if e.kind in ENDING_EVENTS]
     if not ending:
-        return None
+        return mon, None
     t0 = ending[0].t
     kinds = {e.kind for e in ending if e.t <= t0 + EPS}
-    return next(kind for ek, kind in ENDING_EVENTS.items() if ek in kinds), t0
+    return mon, (next(kind for ek, kind in ENDING_EVENTS.items() if ek in kinds), t0)
+
+
+def replay(log: EpisodeLog) -> tuple[Termination, float] | None:
+    """The first ``(kind, t)`` the rules decide over the log (see :func:`run_monitor`)."""
+    return run_monitor(log)[1]

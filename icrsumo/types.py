@@ -235,12 +235,15 @@ class EpisodeLog:
 
     Per-step columns (equal length N, one entry per simulation step after the ego entered):
     ``t`` (s), ``x``/``y`` (m, ego centre), ``yaw`` (rad), ``speed`` (m/s), ``progress`` (m
-    along the route, monotone: the furthest point reached), ``instruction`` (active
-    instruction id, -1 none), ``outside`` (1 when the ego's footprint is outside the route's
-    lanes this step: off the route's lanes, off-road or wrong way, else 0), ``route_dist`` (m,
-    distance from the ego centre to the route polyline). ``route_length`` in m.
-    ``termination`` is a :class:`Termination`; ``t`` strictly increases, ``progress``
-    never decreases, and the route timeout runs from ``t[0]``.
+    along the dense route, monotone: the last point passed), ``instruction`` (active
+    instruction id, -1 none), ``outside`` (Leaderboard 1.0's OutsideRouteLanesTest flags of the
+    step: bit 1 off every driving lane by more than lane width / 2 + 1.3 m, bit 2 in a lane of
+    the opposite direction; 0 inside the lanes), ``route_dist`` (m, ego centre to the nearest
+    of the next route points, as InRouteTest measures it). ``route_length`` (m): the dense
+    route's length. ``route``: the route polyline (m), from which the rules rebuild the dense
+    route (:class:`icrsumo.termination.DenseRoute`). ``termination`` is a
+    :class:`Termination`; ``t`` strictly increases, ``progress`` never decreases, and the
+    route timeout runs from ``t[0]``.
     """
 
     route_id: str
@@ -263,6 +266,7 @@ class EpisodeLog:
     termination: Termination
     termination_t: float
     message: str = ""
+    route: tuple[tuple[float, float], ...] = ()
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,8 @@ class EventKind(StrEnum):
     TELEPORT_BACKGROUND = "teleport_background"
     EGO_TELEPORT = "ego_teleport"
     SIM_ERROR = "sim_error"
+    #: not an event: the infraction that OutsideRouteLanesTest's percentage becomes
+    OUTSIDE_ROUTE_LANES = "outside_route_lanes"
 
 
 class TerminationClass(StrEnum):
@@ -37,9 +39,12 @@ class TerminationClass(StrEnum):
 
 
 class Termination(StrEnum):
-    """Why an episode ended. completed: the route's end was reached; route_deviation: more than
-    30 m from the route; agent_blocked: under 0.1 m/s for 180 s; route_timeout: 0.8 s per metre
-    + 5 s elapsed; stuck: SUMO teleported the ego; sim_error: the simulator failed."""
+    """Why an episode ended (Leaderboard 1.0's rules, :mod:`icrsumo.termination`). completed:
+    more than 99 % of the route and within 10 m of its end; route_deviation: 30 m or more from
+    the route, or more than 30 % of the route advanced while 15 m or more from it;
+    agent_blocked: more than 180 s since the ego last moved at 0.1 m/s or more; route_timeout:
+    int(0.8 s per metre + 5 s) elapsed; stuck: SUMO teleported the ego; sim_error: the
+    simulator failed."""
 
     COMPLETED = "completed"
     ROUTE_DEVIATION = "route_deviation"

@@ -21,8 +21,9 @@ import icrsumo.env  # noqa: E402,F401 - registers the id
 from icrsumo.agents.base import Action, AgentError  # noqa: E402
 from icrsumo.dynamics import Control  # noqa: E402
 from icrsumo.logs import dumps_log  # noqa: E402
-from icrsumo.metrics import route_completion, score_episode  # noqa: E402
+from icrsumo.metrics import score_episode  # noqa: E402
 from icrsumo.sim.episode import run_episode  # noqa: E402
+from icrsumo.termination import dense_route, run_monitor  # noqa: E402
 
 pytestmark = pytest.mark.sumo
 
@@ -85,12 +86,11 @@ def test_rollout_matches_run_episode_and_reports_metrics(cache):
     assert (info["DS"], info["RC"], info["IS"], info["termination"]) == (r.ds, r.rc, r.is_, r.termination)
     assert terminated == (r.termination_class.value != "TO") and truncated == (not terminated)
     assert [i["kind"] for i in info["infractions"]] == [i.kind for i in r.infractions]
-    # the documented reward: RC, minus 100 (1 - f) per infraction, minus 100 x (m driven outside
-    # the route's lanes) / route length
-    penalty = sum(100 * (1 - i.factor) for i in r.infractions)
-    outside = sum(np.hypot(ref.x[i] - ref.x[i - 1], ref.y[i] - ref.y[i - 1])
-                  for i in range(1, len(ref.t)) if ref.outside[i] == 1)
-    expected = route_completion(ref) - penalty - 100 * outside / ref.route_length
+    # the documented reward: RC, minus 100 (1 - f) per event infraction, minus 100 x (route
+    # advance made off the lanes) / route length
+    penalty = sum(100 * (1 - i.factor) for i in r.infractions if i.kind != "outside_route_lanes")
+    mon, _ = run_monitor(ref)
+    expected = mon.completion_pct - penalty - 100 * mon.outside_m / dense_route(ref).length
     assert total == pytest.approx(expected, abs=1e-9)
     assert steps == len(range(0, len(ref.t) - 1, 2))  # one step per decision (every 2nd SUMO step)
 

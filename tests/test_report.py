@@ -120,10 +120,12 @@ def test_paired_rollout_on_bundled_net(tmp_path):
 
 def test_leaderboard_checkpoint():
     recs = tiny() + [rec("B", "r4", "misleading", 0, 30, 100, 0.3,
-                         infractions=(("collision_vehicle", 0.6), ("red_light", 0.7)))]
+                         infractions=(("collision_vehicle", 0.6), ("red_light", 0.7),
+                                      ("outside_route_lanes", 0.3 / 0.42)))]
     cp = leaderboard_checkpoint(recs, "B", "misleading")
     assert set(cp) == {"_checkpoint", "entry_status", "eligible", "sensors", "values", "labels"}
-    assert cp["entry_status"] == "Finished" and cp["eligible"] is True and cp["sensors"] == []
+    # r1 k1 crashed in the simulator: the leaderboard stops there with 'Crashed', not eligible
+    assert cp["entry_status"] == "Crashed" and cp["eligible"] is False and cp["sensors"] == []
     c = cp["_checkpoint"]
     assert set(c) == {"global_record", "progress", "records"}
     assert c["progress"] == [7, 7] and len(c["records"]) == 7
@@ -147,23 +149,33 @@ def test_leaderboard_checkpoint():
     r4 = recs_by_id["RouteScenario_r4_misleading_0"]
     assert r4["scores"] == {"score_route": 100.0, "score_penalty": 0.3, "score_composed": 30.0}
     assert len(r4["infractions"]["collisions_vehicle"]) == 1 and len(r4["infractions"]["red_light"]) == 1
-    # IS 0.3 < 0.6 * 0.7 = 0.42: the rest is off-route driving
-    assert "28.571" in r4["infractions"]["outside_route_lanes"][0]
-    # r3 k0: IS 0.9 with no infraction -> 10 % outside the route lanes
-    assert "10.000%" in recs_by_id["RouteScenario_r3_misleading_0"]["infractions"]["outside_route_lanes"][0]
+    # the outside-lanes entry comes from the stored infraction (1 - 0.3 / 0.42 = 28.57 %) ...
+    assert "28.57%" in r4["infractions"]["outside_route_lanes"][0]
+    # ... never from IS arithmetic: r3 k0 has IS 0.9 but no such infraction, so no entry
+    assert recs_by_id["RouteScenario_r3_misleading_0"]["infractions"]["outside_route_lanes"] == []
 
     g = c["global_record"]
     assert g["index"] == -1 and g["route_id"] == -1 and g["status"] == "Failed"
     assert set(g) >= {"route_id", "index", "status", "infractions", "scores", "meta"}
-    assert g["scores"]["score_composed"] == pytest.approx((20 + 10 + 50 + 90 + 45 + 30) / 6)
-    km = 6 * 0.5
-    assert g["infractions"]["route_dev"] == pytest.approx(3 / km, abs=1e-6)
-    assert g["infractions"]["collisions_vehicle"] == pytest.approx(1 / km, abs=1e-6)
+    # means over every route, the crashed one (0) included
+    assert g["scores"]["score_composed"] == pytest.approx((20 + 0 + 10 + 50 + 90 + 45 + 30) / 7)
+    # rates: sum over routes of count / max(RC / 100 x 0.5 km, 0.001): route deviations on r1 k0
+    # (RC 20: 1 / 0.1), r2 k0 (RC 10: 1 / 0.05), r3 k1 (RC 50: 1 / 0.25); r4's collision (RC 100)
+    assert g["infractions"]["route_dev"] == pytest.approx(10 + 20 + 4, abs=1e-6)
+    assert g["infractions"]["collisions_vehicle"] == pytest.approx(2.0, abs=1e-6)
     assert ["RouteScenario_r1_misleading_1", 1, "Failed - Simulation crashed"] in g["meta"]["exceptions"]
+    assert g["meta"]["total_length"] == 3000.0 and g["meta"]["duration_game"] == 360.0  # crashed: 0
+    assert g["meta"]["duration_system"] == -1
     assert len(cp["values"]) == len(cp["labels"]) == 12
     assert cp["labels"][0] == "Avg. driving score"
     assert cp["values"][0] == f"{g['scores']['score_composed']:.3f}"
     json.loads(dumps_json(cp))  # serialisable, no NaN
+
+    # without the simulator crash: deviations and timeouts name the agent
+    ok = [r for r in recs if r.status == "done"]
+    assert leaderboard_checkpoint(ok, "B", "misleading")["entry_status"] == "Finished with agent errors"
+    done = [rec("B", "r3", "misleading", 0, 90, 100, 0.9)]
+    assert leaderboard_checkpoint(done, "B", "misleading")["entry_status"] == "Finished"
 
     blocked = [EpisodeRecord("X", "r", "noise", 0, 1, "done", termination="agent_blocked",
                              termination_class="TO", is_=1.0)]

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable, Hashable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +16,7 @@ from ..agents.registry import agent_factory
 from ..agents.watch import CallWatch, Unwatched
 from ..errors import Interrupted, describe
 from ..scenario import Scenario
-from ..types import EpisodeRecord, InstructionSet
+from ..types import EpisodeRecord, EpisodeResult, InstructionSet
 from ..vocab import EpisodeStatus, ErrorKind, OutcomeStatus
 from .plan import Job
 
@@ -114,7 +114,7 @@ class EpisodeWorker:
 
     def run(self, job: Job) -> Outcome:
         """Run one episode and score it; every failure becomes an Outcome."""
-        from ..logs import dumps_log
+        from ..logs import dumps_log, loads_log
         from ..metrics import score_episode
         from ..sim.episode import run_episode
 
@@ -126,15 +126,12 @@ class EpisodeWorker:
                 log = run_episode(sc, iset, agent)
             finally:
                 agent.close()  # the optional close() hook: e.g. a remote agent ends its session
-            r = score_episode(log)
-            rec = EpisodeRecord(
+            text = dumps_log(log)
+            r = score_episode(loads_log(text), job.scoring)  # the stored log: a rescore gives the same
+            rec = with_scores(EpisodeRecord(
                 agent=job.agent, route_id=job.route_id, family=job.family, k=job.k, seed=job.seed,
-                status=EpisodeStatus.DONE, ds=r.ds, rc=r.rc, is_=r.is_, termination=r.termination,
-                termination_class=r.termination_class.value,
-                infractions=tuple((i.kind, i.factor) for i in r.infractions),
-                length=round(sc.length, 2), duration=r.duration, message=log.message,
-            )
-            return Outcome.finished(rec, dumps_log(log))
+                status=EpisodeStatus.DONE, length=round(sc.length, 2), message=log.message), r)
+            return Outcome.finished(rec, text)
         except Interrupted:  # the user's Ctrl-C (in-process runs): stop the evaluation
             raise
         except BaseException as err:  # noqa: BLE001 - any failure of the agent or the simulator
@@ -150,6 +147,13 @@ class EpisodeWorker:
                 with contextlib.suppress(Exception):
                     factory.close()
         self.factories.clear()
+
+
+def with_scores(rec: EpisodeRecord, r: EpisodeResult) -> EpisodeRecord:
+    """``rec`` with the scores, termination, infractions and duration of ``r``."""
+    return replace(rec, ds=r.ds, rc=r.rc, is_=r.is_, termination=r.termination,
+                   termination_class=r.termination_class.value,
+                   infractions=tuple((i.kind, i.factor) for i in r.infractions), duration=r.duration)
 
 
 def run_job(job: Job, watch: CallWatch | None = None) -> Outcome:

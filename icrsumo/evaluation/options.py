@@ -13,6 +13,7 @@ from ..errors import InputError, check_seed
 from ..fsio import check_out_dir
 from ..instructions.baseline_bank import load_baseline_bank
 from ..instructions.families import ALL_FAMILIES, FAMILIES
+from ..metrics import SCORINGS, scoring_names
 from ..resources import bundled_suites
 from ..traffic import TRAFFIC_LEVELS
 
@@ -55,6 +56,9 @@ class EvalOptions:
     baseline_bank: Path | str | None = None
     #: run the stored crashed episodes again (a transient fault repaired in place)
     retry_crashed: bool = False
+    #: the scoring rules (``--scoring``): a name of :data:`icrsumo.metrics.SCORINGS`; part of the
+    #: out folder's configuration
+    scoring: str = "lb1"
 
     def check(self) -> None:
         """InputErrors for bad values (agent specs are checked when they are resolved)."""
@@ -89,6 +93,9 @@ class EvalOptions:
                                  "must be at least 1", "give a positive count")
         if self.agent_device is not None:
             check_device(self.agent_device, "agent_device")
+        if self.scoring not in SCORINGS:
+            raise InputError("--scoring", str(self.scoring), "unknown scoring",
+                             f"use {', '.join(scoring_names())}")
         if self.traffic not in TRAFFIC_LEVELS:
             raise InputError("--traffic", str(self.traffic), "unknown traffic level",
                              f"use {', '.join(TRAFFIC_LEVELS)}")

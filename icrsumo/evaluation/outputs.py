@@ -27,6 +27,7 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
 
     families = tuple(f for f in ALL_FAMILIES if f in opts.families)  # canonical order
     summary = summarize(records, suite=opts.suite, seed=opts.seed, k=opts.k, families=families)
+    summary["scoring"] = opts.scoring
     attribution = attach(summary, records, episode_decisions(store, records, instr_dir))
     if not_shown:
         summary["episodes"]["stored_not_in_report"] = not_shown

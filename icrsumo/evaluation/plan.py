@@ -38,6 +38,8 @@ class Job:
     instructions: str
     device: str | None = None
     factory: Callable[[], Agent] | None = field(default=None, compare=False)
+    #: the scoring rules (:data:`icrsumo.metrics.SCORINGS`) of the stored record
+    scoring: str = "lb1"
 
     @property
     def key(self) -> tuple[str, str, str, int, int]:
@@ -61,7 +63,8 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None)
     With a ``--baseline-bank`` (``bank``: the file already loaded) the file's SHA-256 is part of
     it (its name is recorded too, but another path to the same bytes is the same
     configuration)."""
-    config = {"suite": opts.suite, "seed": opts.seed, "k": opts.k, "traffic": opts.traffic}
+    config = {"suite": opts.suite, "seed": opts.seed, "k": opts.k, "traffic": opts.traffic,
+              "scoring": opts.scoring}
     if opts.baseline_bank is not None and bank is None:
         bank = load_baseline_bank(opts.baseline_bank)
     compared = {**config, "baseline_bank_sha256": bank.sha256 if bank is not None else None}
@@ -73,8 +76,14 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None)
         diff = [k for k in compared if old.get(k) != compared[k]]
         if diff:
             shown = ", ".join(f"{k}={old.get(k)!r} (now {compared[k]!r})" for k in diff)
-            raise InputError(out, "config.json", f"holds results of a different configuration: {shown}",
-                             "use another --out folder, or the same options")
+            fix = "use another --out folder, or the same options"
+            if "scoring" in diff and old.get("scoring") is None:
+                fix = ("its episodes were scored before icrsumo scored by the leaderboard's own rules: "
+                       "run them again into another --out folder")
+            elif diff == ["scoring"]:
+                fix = (f"use another --out folder, or --scoring {old.get('scoring')}; icrsumo report OUT "
+                       f"--scoring {opts.scoring} rescores the stored episodes")
+            raise InputError(out, "config.json", f"holds results of a different configuration: {shown}", fix)
     if bank is not None:
         config.update(baseline_bank_sha256=bank.sha256, baseline_bank_file=str(bank.path))
     return config
@@ -176,5 +185,5 @@ def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mappin
             instr = str(instr_dir / f"{safe_name(sc.route_id)}.json")
             for fam, k in sets:
                 jobs.append(Job(spec, names[spec], sc.route_id, fam, k, opts.seed, str(d), instr,
-                                device=opts.agent_device))
+                                device=opts.agent_device, scoring=opts.scoring))
     return jobs

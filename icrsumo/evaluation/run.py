@@ -13,6 +13,7 @@ from ..agents.registry import DEFAULT_AGENT, agent_factory, agent_name
 from ..errors import InputError, check_seed, expect
 from ..fsio import read_json
 from ..instructions.families import ALL_FAMILIES, FAMILIES
+from ..metrics import SCORINGS, score_episode, scoring_names
 from ..store import ResultStore
 from ..types import EpisodeRecord
 from ..vocab import EpisodeStatus, ErrorKind, OutcomeStatus
@@ -131,9 +132,11 @@ def run_queue(queue: list[Job], opts: EvalOptions, store: ResultStore, progress:
         queue = retry
 
 
-def report_only(out: Path, quiet: bool = False) -> dict:
+def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> dict:
     """Rebuild summary, tables and figures of an evaluation folder from its store (no SUMO);
-    returns the summary."""
+    returns the summary. With ``scoring`` (a name of :data:`icrsumo.metrics.SCORINGS`) every
+    finished episode is rescored from its stored log by those rules (the store is left as it
+    is; the summary names the scoring); without, the stored scores are reported."""
     out = Path(out)
     cfg_path = out / "config.json"
     for need in (cfg_path, out / "results.sqlite"):
@@ -150,12 +153,40 @@ def report_only(out: Path, quiet: bool = False) -> dict:
     if not 1 <= cfg["k"] <= 64:
         raise InputError(cfg_path, "k", f"{cfg['k']} is out of range (1 to 64)", fix)
     check_seed(cfg["seed"], f"{cfg_path}: seed")
+    stored_scoring = cfg.get("scoring")
+    if scoring is not None and scoring not in SCORINGS:
+        raise InputError("--scoring", scoring, "unknown scoring", f"use {', '.join(scoring_names())}")
     with ResultStore(out / "results.sqlite") as store:
         records = store.records()
+        if scoring is not None:
+            records = rescore(store, records, scoring)
+        elif stored_scoring is None:
+            raise InputError(cfg_path, "scoring", "its episodes were scored before icrsumo scored by the "
+                             "leaderboard's own rules", "run them again into another --out folder")
         families = tuple(f for f in ALL_FAMILIES if any(r.family == f for r in records))
         agents = tuple(sorted({r.agent for r in records}))
         opts = EvalOptions(out=out, suite=cfg["suite"], agents=agents or (DEFAULT_AGENT,),
                            families=families or FAMILIES, k=int(cfg["k"]), seed=int(cfg["seed"]),
-                           traffic=str(cfg.get("traffic", "normal")), quiet=quiet)
+                           traffic=str(cfg.get("traffic", "normal")), quiet=quiet,
+                           scoring=scoring or stored_scoring)
         return write_outputs(opts, out, store, records, out / "scenarios" if (out / "scenarios").is_dir()
                              else Path(cfg["suite"]), out / "instructions")
+
+
+def rescore(store: ResultStore, records: list[EpisodeRecord], scoring: str) -> list[EpisodeRecord]:
+    """``records`` with every finished episode scored again from its stored log under
+    ``scoring``; crashed episodes stay as they are. An InputError names a finished episode
+    whose log is missing or cannot be read (a rescored report never drops one silently)."""
+    from .execute import with_scores
+
+    out = []
+    for r in records:
+        if r.status == EpisodeStatus.DONE:
+            log = store.episode_log(r.agent, r.route_id, r.family, r.k, r.seed)
+            if log is None:
+                raise InputError(store.path, f"episode {r.agent}/{r.route_id}/{r.family}/{r.k}",
+                                 "has no stored log to rescore",
+                                 "run the evaluation again into another --out folder")
+            r = with_scores(r, score_episode(log, scoring))
+        out.append(r)
+    return out

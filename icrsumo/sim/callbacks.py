@@ -24,7 +24,8 @@ if TYPE_CHECKING:
 class StepRecord(NamedTuple):
     """One recorded simulation step: time ``t`` (s), ego centre ``x``/``y`` (m), ``yaw`` (rad),
     ``speed`` (m/s), route ``progress`` (m), active ``instruction`` id (-1 none), ``outside``
-    (1: off the route's lanes or wrong way), ``route_dist`` (m) and the step's ``events``."""
+    (OutsideRouteLanesTest's bits, see :class:`~icrsumo.types.EpisodeLog`), ``route_dist`` (m)
+    and the step's ``events``."""
 
     t: float
     x: float

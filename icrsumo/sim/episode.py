@@ -25,22 +25,21 @@ from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
-import numpy as np
-
 from ..agents.base import Action, Agent, EpisodeInfo, Observation, World, validate_action
 from ..control import WaypointController, WaypointPath
 from ..dynamics import Control, EgoState, VehicleParams, step
 from ..networks import load_net
 from ..render import BevRenderer, BevSpec
 from ..scenario import Scenario
-from ..termination import TerminationMonitor, route_timeout
+from ..termination import DenseRoute, TerminationMonitor, route_timeout
 from ..types import EgoRoute, EpisodeLog, Event, InstructionSet, LanePos
 from ..vocab import EventKind, Termination
 from .backend import SimulatorError, SumoBackend
 from .callbacks import EpisodeCallback, LogRecorder, StepRecord
 from .drivable import drivable_area
 from .frame import SimFrame
-from .sensors import RouteProjection, Sensors, SensorState
+from .lanes import driving_lanes
+from .sensors import Sensors, SensorState
 
 #: SUMO steps per agent decision (0.05 s x 2 = 10 Hz)
 CONTROL_EVERY = 2
@@ -95,10 +94,12 @@ class Episode:
         self.net = net = load_net(scenario.net)
         m = scenario.manifest
         self.params = params = VehicleParams(length=float(m["ego"]["length"]), width=float(m["ego"]["width"]))
-        self.route = RouteProjection(np.asarray(scenario.polyline, dtype=float))
+        #: the route polyline as the log stores it (m, rounded to 0.01) and its dense route
+        self.polyline = tuple((round(float(x), 2) + 0.0, round(float(y), 2) + 0.0)
+                              for x, y in scenario.polyline)
+        self.route = DenseRoute.from_polyline(self.polyline)
         self.ego_route = ego_route(scenario)
-        self.sensors = Sensors(net, self.route, frozenset(self.ego_route.edges), drivable_area(net),
-                               (params.length, params.width))
+        self.sensors = Sensors(net, driving_lanes(net), drivable_area(net), (params.length, params.width))
         self.renderer = _renderer(str(scenario.net), options.bev)
         self.dt = float(m.get("step_length", 0.05))
         self.instr = instructions.instructions
@@ -124,7 +125,7 @@ class Episode:
         self.monitor: TerminationMonitor | None = None
         self.action = Action(control=Control(brake=1.0))
         self._path: WaypointPath | None = None
-        self.n_max = int((route_timeout(self.route.total) + 10.0) / self.dt) + 10
+        self.n_max = int((route_timeout(self.route.length) + 10.0) / self.dt) + 10
         self.k_instr = -1
         self.i = 0
         #: the ego's lane -> the lights the sensors need in this step's frame
@@ -150,8 +151,9 @@ class Episode:
 
     @property
     def progress(self) -> float:
-        """Route progress (m): the furthest point of the route reached."""
-        return self.sensor_state.progress
+        """Route progress (m): the last point of the dense route passed
+        (:class:`~icrsumo.termination.TerminationMonitor`)."""
+        return self.monitor.progress if self.monitor is not None else 0.0
 
     def _finish(self, termination: Termination, t: float) -> None:
         self.termination, self.term_t, self.done = termination, t, True
@@ -180,7 +182,7 @@ class Episode:
             self.state = EgoState(sx - 0.5 * params.length * math.cos(sh),
                                   sy - 0.5 * params.length * math.sin(sh), sh)
             backend.insert_ego(sx, sy, sh)
-            self.monitor = TerminationMonitor(self.route.total, backend.time)
+            self.monitor = TerminationMonitor(self.route, round(backend.time, 3))
             for cb in self.callbacks:
                 cb.on_ready(self)
             return self._advance()
@@ -237,15 +239,19 @@ class Episode:
             self.recorder.events.append(Event(EventKind.EGO_TELEPORT, t, self.progress, "", state.x, state.y))
             self._finish(Termination.STUCK, t)
             return True
-        events, ss = self.sensors.detect(self.sensor_state, frame, state)
+        # the rules see the values the log stores (rounded as icrsumo.logs rounds them)
+        mon = self.monitor
+        t, x, y, speed = round(t, 3) + 0.0, round(state.x, 2) + 0.0, round(state.y, 2) + 0.0, \
+            round(state.speed, 3) + 0.0
+        progress = mon.locate(x, y)
+        events, ss = self.sensors.detect(self.sensor_state, frame, state, progress)
         self.sensor_state = ss
-        k = self.k_instr = _active(self.triggers, ss.progress)
-        rec = StepRecord(t, state.x, state.y, state.yaw, state.speed, ss.progress,
-                         self.instr[k].id if k >= 0 else -1, 1 if ss.outside else 0, ss.route_dist,
-                         tuple(events))
+        k = self.k_instr = _active(self.triggers, progress)
+        rec = StepRecord(t, state.x, state.y, state.yaw, state.speed, progress,
+                         self.instr[k].id if k >= 0 else -1, ss.outside, mon.route_dist, tuple(events))
         for cb in self.callbacks:
             cb.on_step(self, rec)
-        done = self.monitor.update(t, ss.progress, ss.route_dist, state.speed, events)
+        done = mon.update(t, speed, ss.outside, events)
         if done:
             self._finish(Termination(done), t)
             return True
@@ -287,11 +293,12 @@ class Episode:
         return EpisodeLog(
             route_id=scenario.route_id, agent=agent,
             family=instructions.family, k=instructions.k, seed=scenario.seed, step_length=self.dt,
-            route_length=self.route.total, t=tuple(cols["t"]), x=tuple(cols["x"]), y=tuple(cols["y"]),
+            route_length=self.route.length, t=tuple(cols["t"]), x=tuple(cols["x"]), y=tuple(cols["y"]),
             yaw=tuple(cols["yaw"]), speed=tuple(cols["speed"]), progress=tuple(cols["progress"]),
             instruction=tuple(cols["instruction"]), outside=tuple(cols["outside"]),
             route_dist=tuple(cols["route_dist"]), events=tuple(self.recorder.events),
             termination=self.termination, termination_t=self.term_t, message=self.message,
+            route=self.polyline,
         )
 
 

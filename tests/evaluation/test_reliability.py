@@ -175,7 +175,7 @@ def test_a_folder_where_an_output_file_belongs_is_one_line(tmp_path, capsys):
     out = tmp_path / "o"
     out.mkdir()
     _store(out / "results.sqlite", 3)
-    (out / "config.json").write_text('{"suite": "tiny", "k": 1, "seed": 2026}')
+    (out / "config.json").write_text('{"suite": "tiny", "k": 1, "seed": 2026, "scoring": "lb1"}')
     (out / "summary.json").mkdir()
     code = main(["report", str(out), "--quiet"])
     err = capsys.readouterr().err.strip().splitlines()
@@ -186,7 +186,7 @@ def test_a_folder_where_an_output_file_belongs_is_one_line(tmp_path, capsys):
 def test_the_last_resort_is_one_line_and_debug_shows_the_traceback(tmp_path, capsys, monkeypatch):
     import icrsumo.evaluation.run as run
 
-    def boom(out, quiet=False):
+    def boom(out, quiet=False, scoring=None):
         raise KeyError("something nobody foresaw")
 
     monkeypatch.setattr(run, "report_only", boom)

@@ -16,7 +16,7 @@ from icrsumo.networks import load_net
 from icrsumo.render import BevRenderer, BevSpec
 from icrsumo.resources import bundled_towns
 from icrsumo.sim.drivable import drivable_area
-from icrsumo.sim.sensors import LaneHeading, RouteProjection, footprint_corners, off_corners
+from icrsumo.sim.sensors import LaneHeading, footprint_corners, off_corners
 
 
 # ----------------------------------------------------------------------------- references
@@ -43,34 +43,6 @@ class _RefController:
         if u >= 0:
             return Control(steer=steer, throttle=float(min(u, 1.0)), brake=0.0)
         return Control(steer=steer, throttle=0.0, brake=float(min(-u * 0.5, 1.0)))
-
-
-class _RefRoute:
-    """The route projection as first written."""
-
-    def __init__(self, poly: np.ndarray) -> None:
-        self.a, self.b = poly[:-1], poly[1:]
-        self.ab = self.b - self.a
-        self.len = np.hypot(self.ab[:, 0], self.ab[:, 1])
-        self.cum = np.concatenate([[0.0], np.cumsum(self.len)])
-
-    def _proj(self, p, idx):
-        ab, a = self.ab[idx], self.a[idx]
-        t = np.clip(((p - a) * ab).sum(axis=1) / np.maximum(self.len[idx] ** 2, 1e-9), 0.0, 1.0)
-        q = a + ab * t[:, None]
-        return np.hypot(*(q - p).T), self.cum[idx] + t * self.len[idx]
-
-    def locate(self, x, y, progress):
-        p = np.array([x, y])
-        d_all, s_all = self._proj(p, np.arange(len(self.len)))
-        idx = np.nonzero((self.cum[1:] >= progress - 20.0) & (self.cum[:-1] <= progress + 40.0))[0]
-        if len(idx):
-            d, s = d_all[idx], s_all[idx]
-            k = int(np.argmin(d))
-            s_here = float(s[k]) if d[k] < 15.0 else progress
-        else:
-            s_here = progress
-        return s_here, float(d_all.min())
 
 
 def _random_waypoints(rng: np.random.Generator) -> np.ndarray:
@@ -109,22 +81,6 @@ def test_controller_is_the_reference_float_for_float():
         c = WaypointController(params).control(wps, 3.0, 0.05)  # plain arrays still work
         d = _RefController(params).control(wps, 3.0, 0.05)
         assert c == d
-
-
-def test_route_locate_is_the_reference_float_for_float():
-    rng = np.random.default_rng(3)
-    for i in range(120):
-        n = int(rng.integers(2, 40)) if i % 3 else int(rng.integers(40, 150))  # both code paths
-        poly = np.cumsum(rng.uniform(-8.0, 12.0, (n, 2)), axis=0).round(2)
-        if rng.random() < 0.2:
-            poly[n // 2] = poly[n // 2 - 1]  # a zero-length segment
-        if rng.random() < 0.2:  # a route that comes back on itself: equal distances
-            poly = np.concatenate([poly, poly[::-1][1:]])
-        fast, ref = RouteProjection(poly), _RefRoute(poly)
-        for j in range(40):
-            x, y = poly[int(rng.integers(len(poly)))] + rng.normal(0.0, 6.0 if j % 4 else 1e-7, 2)
-            progress = float(rng.uniform(-5.0, fast.total + 5.0))
-            assert fast.locate(float(x), float(y), progress) == ref.locate(float(x), float(y), progress)
 
 
 @pytest.fixture(scope="module", params=["icr_grid", "icr_roundabout", "icr_rural"])
