@@ -93,7 +93,8 @@ def log_to_dict(log: EpisodeLog) -> dict[str, Any]:
         "termination": log.termination,
         "termination_t": _r(log.termination_t, 3, "termination_t"),
         "message": log.message,
-        "route": [[_r(x, 2, f"route[{i}]"), _r(y, 2, f"route[{i}]")] for i, (x, y) in enumerate(log.route)],
+        "route": [[_r(p[0], 2, f"route[{i}]"), _r(p[1], 2, f"route[{i}]")]
+                  + ([_r(p[2], 4, f"route[{i}]")] if len(p) > 2 else []) for i, p in enumerate(log.route)],
         "steps": steps,
         "events": events,
     }
@@ -200,10 +201,11 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
     if not isinstance(raw_route, list) or (n and not raw_route):
         raise rd.fail("route", "expected a non-empty list of [x, y] points")
     route = []
+    width = len(raw_route[0]) if raw_route and isinstance(raw_route[0], list) else 2
     for i, p in enumerate(raw_route):
-        if not isinstance(p, list) or len(p) != 2:
-            raise rd.fail(f"route[{i}]", f"expected [x, y], got {short(p)}")
-        route.append((rd.number(p[0], f"route[{i}][0]"), rd.number(p[1], f"route[{i}][1]")))
+        if not isinstance(p, list) or len(p) != width or width not in (2, 3):
+            raise rd.fail(f"route[{i}]", f"expected [x, y] or [x, y, heading] like route[0], got {short(p)}")
+        route.append(tuple(rd.number(v, f"route[{i}][{j}]") for j, v in enumerate(p)))
 
     raw_events = rd.get(d, "events")
     if not isinstance(raw_events, list):

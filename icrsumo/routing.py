@@ -174,17 +174,20 @@ def build_route(net: RoadNet, edges: list[str], start: _Cand, end: _Cand) -> Ego
     junctions: list[JunctionPass] = []
     changes: list[LaneChange] = []
     pieces: list[np.ndarray] = []
+    heads: list[list[float]] = []
     length = 0.0
 
     def add(piece: np.ndarray) -> None:
         nonlocal length
+        h = lane_headings(piece, heads[-1][-1] if heads else 0.0)
         if pieces and len(piece) and np.allclose(pieces[-1][-1], piece[0]):
-            piece = piece[1:]
+            piece, h = piece[1:], h[1:]
         if len(piece):
             if pieces:
                 length += float(np.hypot(*(piece[0] - pieces[-1][-1])))
             length += float(np.hypot(*np.diff(piece, axis=0).T).sum()) if len(piece) > 1 else 0.0
             pieces.append(piece)
+            heads.append(h)
 
     for i, edge in enumerate(edges):
         a_pos = start.pos if i == 0 else 0.0
@@ -228,7 +231,25 @@ def build_route(net: RoadNet, edges: list[str], start: _Cand, end: _Cand) -> Ego
         length=round(length, 2),
         junctions=tuple(junctions),
         lane_changes=tuple(changes),
+        headings=tuple(round(h, 4) + 0.0 for hs in heads for h in hs),
     )
+
+
+def lane_headings(shape: np.ndarray, before: float) -> list[float]:
+    """The direction (rad) of a lane piece ((N, 2) m) at each vertex: of the segment starting
+    there, the last vertex that of the segment ending there; a zero-length segment takes its
+    neighbour's, a single point ``before``."""
+    n = len(shape)
+    segs = [math.atan2(float(shape[i + 1][1] - shape[i][1]), float(shape[i + 1][0] - shape[i][0]))
+            if float(np.hypot(*(shape[i + 1] - shape[i]))) > 1e-9 else None for i in range(n - 1)]
+    known = [h for h in segs if h is not None]
+    if not known:
+        return [before] * n
+    out, last = [], known[0]
+    for h in segs:
+        last = h if h is not None else last
+        out.append(last)
+    return out + [last]
 
 
 def plan_route(

@@ -109,6 +109,8 @@ class Scenario:
     """One runnable scenario. Paths are absolute; lengths in m, times in s, angles in rad.
 
     ``ego_edges``: the ego's normal edges in order; ``polyline``: (N, 2) route centre line;
+    ``headings``: (N,) lane direction at each polyline vertex (rad; empty in scenarios written
+    before icrsumo recorded it);
     ``start``: (x, y, heading) of the ego at the route start; ``ego_depart``: simulation time
     at which the ego enters (background traffic warms up before).
     """
@@ -129,6 +131,7 @@ class Scenario:
     end_time: float
     weather: dict
     manifest: dict
+    headings: tuple[float, ...] = ()
 
 
 def _rel_file(c: DocChecker, base: Path, value: Any, place: str, what: str) -> Path:
@@ -200,6 +203,12 @@ def check_manifest(m: dict, c: DocChecker) -> None:
             raise c.fail(f"route.polyline[{i}]", f"must be [x, y], not {len(pt)} numbers")
         c.number(pt[0], f"route.polyline[{i}][0]")
         c.number(pt[1], f"route.polyline[{i}][1]")
+    if "headings" in route:
+        heads = c.lst(route["headings"], "route.headings")
+        if len(heads) != len(poly):
+            raise c.fail("route.headings", f"has {len(heads)} entries for {len(poly)} polyline points")
+        for i, h in enumerate(heads):
+            c.number(h, f"route.headings[{i}]")
     for i, j in enumerate(c.lst(c.key(m, "junctions"), "junctions")):
         place = f"junctions[{i}]"
         j = c.obj(j, place)
@@ -353,6 +362,7 @@ def read_scenario(path: Path) -> Scenario:
         seed=int(m["seed"]), ego_edges=tuple(ego["edges"]), start_lane=st["lane"],
         start_pos=float(st["pos"]), start=(float(st["x"]), float(st["y"]), float(st["heading"])),
         polyline=tuple((float(x), float(y)) for x, y in m["route"]["polyline"]),
+        headings=tuple(float(h) for h in m["route"].get("headings", ())),
         length=float(m["route"]["length"]), ego_depart=float(ego["depart"]),
         end_time=float(m["traffic"]["end"]), weather=dict(m["weather"]), manifest=m,
     )

@@ -92,40 +92,44 @@ class DenseRoute:
 
     @classmethod
     def from_polyline(cls, polyline: Sequence[Sequence[float]]) -> DenseRoute:
-        """The dense route of a polyline ((N, 2) m, N >= 1; repeated points are skipped)."""
+        """The dense route of a polyline ((N, 2) m, or (N, 3) with the lane's heading in rad at
+        each vertex; N >= 1; repeated points are skipped).
+
+        Without headings the polyline is one lane: points every :data:`HOP_M` m of arc, each
+        with its segment's direction. With headings, a point's direction is its lane's, as
+        CARLA takes it from the lane under the route point, and the polyline is cut into lane
+        pieces at the segments that join two lanes (a segment more than
+        :data:`JOIN_RAD` off the heading of its first vertex: a lane change's sideways step, a
+        junction lane that starts off the end of the lane before it). Each piece is sampled on
+        its own, a join is one step from the last point of a piece to the first of the next
+        (as the leaderboard's route has one waypoint on each lane of a lane change), and the
+        start of a piece that lies behind the end of the one before (along that one's heading)
+        is cut off there, so no stretch of road is counted twice."""
         pts: list[tuple[float, float]] = []
+        heads: list[float | None] = []
         for p in polyline:
             q = (float(p[0]), float(p[1]))
-            if not (math.isfinite(q[0]) and math.isfinite(q[1])):
+            h = float(p[2]) if len(p) > 2 else None
+            if not all(math.isfinite(v) for v in (*q, 0.0 if h is None else h)):
                 raise ValueError(f"route point {p!r} is not finite")
             if not pts or q != pts[-1]:
                 pts.append(q)
+                heads.append(h)
         if not pts:
             raise ValueError("the route has no points")
-        segs = [(a, b, math.hypot(b[0] - a[0], b[1] - a[1])) for a, b in zip(pts, pts[1:])]
-        xs, ys, fxs, fys = [], [], [], []
-        total = math.fsum(s[2] for s in segs)
-        n_hops = int(math.floor(total / HOP_M + 1e-9))
-        targets = [k * HOP_M for k in range(n_hops + 1)]
-        if total - targets[-1] > 1e-6:
-            targets.append(total)
-        k, start = 0, 0.0
-        for s in targets:
-            while k < len(segs) - 1 and start + segs[k][2] <= s:
-                start += segs[k][2]
-                k += 1
-            if segs:
-                (ax, ay), (bx, by), ln = segs[k]
-                u = min(max((s - start) / ln, 0.0), 1.0) if ln > 0 else 0.0
-                xs.append(ax + (bx - ax) * u)
-                ys.append(ay + (by - ay) * u)
-                fxs.append((bx - ax) / ln if ln > 0 else 1.0)
-                fys.append((by - ay) / ln if ln > 0 else 0.0)
-            else:
-                xs.append(pts[0][0])
-                ys.append(pts[0][1])
-                fxs.append(1.0)
-                fys.append(0.0)
+        pieces = _lane_pieces(pts, heads)
+        xs: list[float] = []
+        ys: list[float] = []
+        fxs: list[float] = []
+        fys: list[float] = []
+        for piece in pieces:
+            for x, y, fx, fy in _sample(piece):
+                if xs and (x, y) == (xs[-1], ys[-1]):
+                    continue
+                xs.append(x)
+                ys.append(y)
+                fxs.append(fx)
+                fys.append(fy)
         accum = [0.0]
         for i in range(1, len(xs)):
             accum.append(accum[-1] + math.hypot(xs[i] - xs[i - 1], ys[i] - ys[i - 1]))
@@ -139,6 +143,69 @@ class DenseRoute:
     def passed(self, i: int, x: float, y: float) -> bool:
         """Whether (x, y) is ahead of point ``i`` along the route's direction there (dot > 0)."""
         return (x - self.x[i]) * self.fx[i] + (y - self.y[i]) * self.fy[i] > 0.0
+
+
+#: a segment more than this far off its first vertex's lane heading joins two lanes (rad)
+JOIN_RAD = math.radians(10.0)
+
+_Piece = list[tuple[float, float, float | None]]
+
+
+def _lane_pieces(pts: list[tuple[float, float]], heads: list[float | None]) -> list[_Piece]:
+    """The polyline cut into lane pieces (see :meth:`DenseRoute.from_polyline`): lists of
+    (x, y, heading or None)."""
+    if any(h is None for h in heads):
+        return [[(x, y, None) for x, y in pts]]
+    pieces: list[_Piece] = [[(pts[0][0], pts[0][1], heads[0])]]
+    for i in range(1, len(pts)):
+        (ax, ay), (bx, by), h = pts[i - 1], pts[i], heads[i - 1]
+        d = math.atan2(by - ay, bx - ax)
+        off = abs((d - h + math.pi) % (2.0 * math.pi) - math.pi)
+        if off > JOIN_RAD:
+            pieces.append([])
+        pieces[-1].append((bx, by, heads[i]))
+    out: list[_Piece] = [pieces[0]]
+    for piece in pieces[1:]:
+        ex, ey, eh = out[-1][-1]
+        ux, uy = math.cos(eh), math.sin(eh)
+        ahead = [(x - ex) * ux + (y - ey) * uy for x, y, _ in piece]
+        k = next((i for i, a in enumerate(ahead) if a > 0.0), None)
+        if k is None:  # wholly behind the end of the road so far
+            continue
+        if k > 0:  # cut where the piece passes the end of the one before
+            (x0, y0, h0), (x1, y1, _) = piece[k - 1], piece[k]
+            u = -ahead[k - 1] / (ahead[k] - ahead[k - 1])
+            piece = [(x0 + (x1 - x0) * u, y0 + (y1 - y0) * u, h0)] + piece[k:]
+        out.append(piece)
+    return out
+
+
+def _sample(piece: _Piece) -> list[tuple[float, float, float, float]]:
+    """Points of one lane piece every :data:`HOP_M` m of arc from its start, and its end:
+    (x, y, direction x, direction y)."""
+    if len(piece) == 1:
+        x, y, h = piece[0]
+        return [(x, y, math.cos(h), math.sin(h)) if h is not None else (x, y, 1.0, 0.0)]
+    segs = []
+    for (ax, ay, h), (bx, by, _) in zip(piece, piece[1:]):
+        ln = math.hypot(bx - ax, by - ay)
+        fx, fy = (math.cos(h), math.sin(h)) if h is not None else ((bx - ax) / ln, (by - ay) / ln)
+        segs.append((ax, ay, bx, by, ln, fx, fy))
+    total = math.fsum(sg[4] for sg in segs)
+    n_hops = int(math.floor(total / HOP_M + 1e-9))
+    targets = [k * HOP_M for k in range(n_hops + 1)]
+    if total - targets[-1] > 1e-6:
+        targets.append(total)
+    out = []
+    k, start = 0, 0.0
+    for s in targets:
+        while k < len(segs) - 1 and start + segs[k][4] <= s:
+            start += segs[k][4]
+            k += 1
+        ax, ay, bx, by, ln, fx, fy = segs[k]
+        u = min(max((s - start) / ln, 0.0), 1.0)
+        out.append((ax + (bx - ax) * u, ay + (by - ay) * u, fx, fy))
+    return out
 
 
 def route_timeout(route_length: float) -> float:
@@ -316,7 +383,8 @@ def events_by_step(log: EpisodeLog) -> tuple[list[list[Event]], list[Event]]:
 
 
 def dense_route(log: EpisodeLog) -> DenseRoute:
-    """The dense route of the log's route polyline (ValueError when the log has none)."""
+    """The dense route of the log's route polyline and headings (ValueError when the log has
+    none)."""
     if not log.route:
         raise ValueError("the episode log holds no route polyline")
     return DenseRoute.from_polyline(log.route)

@@ -113,7 +113,10 @@ class EgoRoute:
 
     ``edges``: normal edge ids in driving order; ``lanes[i]``: indices of the lanes of
     ``edges[i]`` from which the route can continue; ``lane_path[i]``: the lane driven on
-    ``edges[i]``; ``polyline``: (N, 2) centre line in m from start to end; ``length`` in m.
+    ``edges[i]``; ``polyline``: (N, 2) centre line in m from start to end; ``length`` in m;
+    ``headings``: (N,) rad, the direction of the lane at each polyline vertex (of the lane
+    piece the vertex starts; the segments that join two lane pieces, such as a lane change's
+    sideways step, have no lane of their own and keep the heading of the lane they leave).
     """
 
     edges: tuple[str, ...]
@@ -125,6 +128,7 @@ class EgoRoute:
     length: float
     junctions: tuple[JunctionPass, ...]
     lane_changes: tuple[LaneChange, ...]
+    headings: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -240,8 +244,9 @@ class EpisodeLog:
     step: bit 1 off every driving lane by more than lane width / 2 + 1.3 m, bit 2 in a lane of
     the opposite direction; 0 inside the lanes), ``route_dist`` (m, ego centre to the nearest
     of the next route points, as InRouteTest measures it). ``route_length`` (m): the dense
-    route's length. ``route``: the route polyline (m), from which the rules rebuild the dense
-    route (:class:`icrsumo.termination.DenseRoute`). ``termination`` is a
+    route's length. ``route``: the route polyline (m; a third value per point: the lane's
+    heading there, rad), from which the rules rebuild the dense route
+    (:class:`icrsumo.termination.DenseRoute`). ``termination`` is a
     :class:`Termination`; ``t`` strictly increases, ``progress`` never decreases, and the
     route timeout runs from ``t[0]``.
     """
@@ -266,7 +271,7 @@ class EpisodeLog:
     termination: Termination
     termination_t: float
     message: str = ""
-    route: tuple[tuple[float, float], ...] = ()
+    route: tuple[tuple[float, ...], ...] = ()
 
 
 @dataclass(frozen=True)

@@ -94,9 +94,13 @@ class Episode:
         self.net = net = load_net(scenario.net)
         m = scenario.manifest
         self.params = params = VehicleParams(length=float(m["ego"]["length"]), width=float(m["ego"]["width"]))
-        #: the route polyline as the log stores it (m, rounded to 0.01) and its dense route
-        self.polyline = tuple((round(float(x), 2) + 0.0, round(float(y), 2) + 0.0)
-                              for x, y in scenario.polyline)
+        #: the route polyline as the log stores it (m, rounded to 0.01; with the lane heading at
+        #: each vertex, rad rounded to 1e-4, where the scenario has them) and its dense route
+        heads = scenario.headings if len(scenario.headings) == len(scenario.polyline) else None
+        self.polyline = tuple(
+            (round(float(x), 2) + 0.0, round(float(y), 2) + 0.0)
+            + ((round(float(heads[i]), 4) + 0.0,) if heads else ())
+            for i, (x, y) in enumerate(scenario.polyline))
         self.route = DenseRoute.from_polyline(self.polyline)
         self.ego_route = ego_route(scenario)
         self.sensors = Sensors(net, driving_lanes(net), drivable_area(net), (params.length, params.width))

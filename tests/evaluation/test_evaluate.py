@@ -83,6 +83,48 @@ def test_report_rebuilds_without_simulating(reference, tmp_path, capsys):
     assert (ref_out / "summary.json").read_bytes() == summary
 
 
+def test_report_rescores_from_the_logs_alone_to_the_same_numbers(reference, tmp_path, capsys):
+    """`report --scoring lb1` scores every stored episode again from its log (no simulation):
+    the same records, the same summary and tables as the run that stored them; the episodes'
+    terminations replay from their logs to the same kind and time."""
+    from icrsumo.termination import replay
+
+    ref_out, _ = reference
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for name in ("config.json", "results.sqlite"):
+        (copy / name).write_bytes((ref_out / name).read_bytes())
+    (copy / "instructions").symlink_to(ref_out / "instructions")
+    assert main(["report", str(copy), "--quiet", "--scoring", "lb1"]) == 0
+    for name in ("summary.json", "results.md", "episodes.csv", "leaderboard/route-oracle_misleading.json"):
+        assert (copy / name).read_bytes() == (ref_out / name).read_bytes(), name
+    assert json.loads((copy / "summary.json").read_text())["scoring"] == "lb1"
+    with ResultStore(ref_out / "results.sqlite") as store:
+        for r in store.records():
+            log = store.episode_log(r.agent, r.route_id, r.family, r.k, r.seed)
+            assert replay(log) == (log.termination, log.termination_t)
+    code = main(["report", str(copy), "--quiet", "--scoring", "lb9"])
+    assert code == 2 and "--scoring" in capsys.readouterr().err
+
+
+def test_another_scoring_is_another_configuration(reference, capsys):
+    ref_out, _ = reference
+    raw = (ref_out / "config.json").read_bytes()
+    cfg = json.loads(raw)
+    assert cfg["scoring"] == "lb1"
+    (ref_out / "config.json").write_text(json.dumps({**cfg, "scoring": None}))
+    try:
+        code = main(["evaluate", "--out", str(ref_out), "--routes", ",".join(ROUTES), "--k", "2",
+                     "--agent", "route-oracle", "--agent", "instruction-follower", "--family", "misleading",
+                     "--family", "noise", "--quiet"])
+        err = capsys.readouterr().err
+        assert code == 2 and "scored before icrsumo scored by the leaderboard's own rules" in err
+        assert main(["report", str(ref_out), "--quiet"]) == 2
+        assert "scored before" in capsys.readouterr().err
+    finally:
+        (ref_out / "config.json").write_bytes(raw)
+
+
 def test_ray_backend_gives_identical_results(reference, tmp_path):
     pytest.importorskip("ray")
     ref_out, _ = reference
