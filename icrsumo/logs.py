@@ -42,7 +42,12 @@ STEP_COLUMNS: dict[str, int | None] = {
     "instruction": None,
     "outside": None,
     "route_dist": 2,
+    "traffic_speed": 3,
+    "speed_limit": 2,
 }
+
+#: columns a log may leave empty (not recorded)
+OPTIONAL_COLUMNS = ("traffic_speed", "speed_limit")
 
 #: event fields in stored order -> decimals (None: string)
 EVENT_FIELDS: dict[str, int | None] = {"kind": None, "t": 3, "pos": 2, "other": None, "x": 2, "y": 2}
@@ -50,8 +55,8 @@ EVENT_FIELDS: dict[str, int | None] = {"kind": None, "t": 3, "pos": 2, "other": 
 _HEADER = ("version", "route_id", "agent", "family", "k", "seed", "step_length", "route_length",
            "termination", "termination_t", "message", "route", "steps", "events")
 
-#: largest value of the per-step ``outside`` bits (OFF_LANES | WRONG_LANE)
-_OUTSIDE_MAX = 3
+#: largest value of the per-step ``outside`` bits (OFF_LANES | WRONG_LANE | their 2.0 twins)
+_OUTSIDE_MAX = 15
 
 _DEFAULT_SOURCE = "<episode log>"
 
@@ -70,7 +75,7 @@ def log_to_dict(log: EpisodeLog) -> dict[str, Any]:
     steps: dict[str, list] = {}
     for col, dec in STEP_COLUMNS.items():
         values = getattr(log, col)
-        if len(values) != n:
+        if len(values) != n and not (col in OPTIONAL_COLUMNS and not values):
             raise ValueError(f"episode log: column {col!r} has {len(values)} entries, t has {n}")
         if dec is None:
             steps[col] = [int(v) for v in values]
@@ -184,7 +189,7 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
         cols[col] = tuple(conv(v, f"steps.{col}[{i}]") for i, v in enumerate(raw))
     n = len(cols["t"])
     for col, values in cols.items():
-        if len(values) != n:
+        if len(values) != n and not (col in OPTIONAL_COLUMNS and not values):
             raise rd.fail(f"steps.{col}", f"has {len(values)} entries but steps.t has {n}",
                           "all step columns must have equal length")
     for i in range(1, n):
@@ -246,6 +251,8 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
         termination_t=rd.number(rd.get(d, "termination_t"), "termination_t"),
         message=rd.string(d.get("message", ""), "message"),
         route=tuple(route),
+        traffic_speed=cols["traffic_speed"],
+        speed_limit=cols["speed_limit"],
     )
 
 
@@ -297,6 +304,7 @@ def result_to_dict(result: EpisodeResult) -> dict[str, Any]:
         "termination_class": TerminationClass(result.termination_class).value,
         "outside_lanes_pct": float(result.outside_lanes_pct),
         "duration": float(result.duration),
+        "outside_m": float(result.outside_m),
         "infractions": [[i.kind, float(i.factor), float(i.t), float(i.pos), i.other]
                         for i in result.infractions],
     }
@@ -338,4 +346,5 @@ def result_from_dict(d: Any, source: str = "<episode result>") -> EpisodeResult:
         infractions=tuple(infractions),
         outside_lanes_pct=rd.number(rd.get(d, "outside_lanes_pct"), "outside_lanes_pct"),
         duration=rd.number(rd.get(d, "duration"), "duration"),
+        outside_m=rd.number(d.get("outside_m", 0.0), "outside_m"),
     )

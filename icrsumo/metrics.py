@@ -13,16 +13,26 @@ Leaderboard 1.0 (``lb1``, the default) reproduces ``leaderboard/utils/statistics
 * DS = RC x IS.
 
 Collisions are counted as ``CollisionTest`` counts them (:func:`counted_collisions`).
+
+Leaderboard 2.0 (``lb2``) reproduces the 2.0 branches of the same files where they apply to
+icrsumo's routes: RC rounded to 2 decimals, OutsideRouteLanesTest with 2.0's lane rules, its
+``CollisionTest`` (:class:`CollisionCounter2`: one remembered place within 5 m, none while the
+ego is below 0.1 m/s), MinimumSpeedRouteTest's factor ``1 - 0.3 (1 - pct / 100)`` per
+checkpoint below 100 % of the other vehicles' mean speed (4 checkpoints), and the route
+timeout of RouteTimeoutBehavior (:mod:`icrsumo.termination`). Scenario-specific criteria
+(yield to an emergency vehicle, scenario timeouts) have no counterpart here.
+
 :data:`SCORINGS` is the registry of scoring rules (a name is registered once).
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
-from icrsumo.termination import EPS, events_by_step, run_monitor
+from icrsumo.termination import EPS, LB1_RULES, LB2_RULES, RouteRules, events_by_step, replay, run_monitor
 from icrsumo.types import TERMINATIONS, EpisodeLog, EpisodeResult, Event, Infraction
 from icrsumo.vocab import EventKind, Termination
 
@@ -104,6 +114,59 @@ def counted_collisions(log: EpisodeLog) -> list[Event]:
     return out
 
 
+class CollisionCounter2:
+    """Leaderboard 2.0's ``CollisionTest``, step by step (see :class:`CollisionCounter`): a
+    contact is ignored when it is with the remembered actor, within 5 m of the one remembered
+    place, or while the ego is below 0.1 m/s; a counted one replaces the place and time (and
+    the actor, unless it is the static layout). The place is forgotten once the ego is more
+    than 5 m from it, the actor 5 s after the last counted collision."""
+
+    RADIUS = 5.0
+    MIN_SPEED = 0.1
+
+    def __init__(self) -> None:
+        self.place: tuple[float, float] | None = None
+        self.last_id: str | None = None
+        self.last_t = 0.0
+
+    def _near(self, x: float, y: float) -> bool:
+        """Whether the ego centre (m) is within 5 m of the remembered place."""
+        p = self.place
+        return p is not None and math.sqrt((x - p[0]) ** 2 + (y - p[1]) ** 2) <= self.RADIUS
+
+    def step(self, t: float, x: float, y: float, speed: float, events: Sequence[Event]) -> list[Event]:
+        out: list[Event] = []
+        for e in events:
+            if e.kind not in COLLISIONS:
+                continue
+            actor = e.other if e.kind != EventKind.COLLISION_STATIC else ""
+            if actor and actor == self.last_id:
+                continue
+            if self._near(x, y):
+                continue
+            if speed < self.MIN_SPEED:
+                continue
+            out.append(e)
+            self.last_t, self.place = t, (x, y)
+            if actor:
+                self.last_id = actor
+        if self.place is not None and not self._near(x, y):
+            self.place = None
+        if self.last_id is not None and t - self.last_t > MAX_ID_TIME + EPS:
+            self.last_id = None
+        return out
+
+
+def counted_collisions_lb2(log: EpisodeLog) -> list[Event]:
+    """The collision events of ``log`` that Leaderboard 2.0's CollisionTest counts."""
+    by_step, _ = events_by_step(log)
+    counter = CollisionCounter2()
+    out: list[Event] = []
+    for i, evs in enumerate(by_step):
+        out += counter.step(log.t[i], log.x[i], log.y[i], log.speed[i], evs)
+    return out
+
+
 def penalised_infractions(log: EpisodeLog) -> tuple[Infraction, ...]:
     """The penalised event infractions of ``log`` in time order: the collisions
     :func:`counted_collisions` counts, and every red-light and stop-sign event (the sensors
@@ -117,19 +180,68 @@ def penalised_infractions(log: EpisodeLog) -> tuple[Infraction, ...]:
                  for e in sorted(chosen, key=lambda ev: ev.t))
 
 
+def ended_by(log: EpisodeLog, rules: RouteRules) -> tuple[EpisodeLog, bool]:
+    """The log as a fresh run under ``rules`` would have recorded it, and whether that is
+    exact. The simulation does not depend on the rules, so where they end the episode on one of
+    the log's steps, the log cut there (with that termination) is exactly that run's; where no
+    rule of theirs fired by the log's end (it was recorded under rules that end sooner), the
+    log is returned as it is and not exact."""
+    end = replay(log, rules)
+    if end is None:
+        ending = log.termination in (Termination.SIM_ERROR, Termination.STUCK)
+        return log, ending
+    kind, t = end
+    n = bisect.bisect_right(log.t, t + EPS)
+    if n >= len(log.t) and kind == log.termination:
+        return log, True
+    half = 0.5 * log.step_length + EPS
+    cut = {f: getattr(log, f)[:n] for f in ("t", "x", "y", "yaw", "speed", "progress", "instruction",
+                                               "outside", "route_dist", "traffic_speed", "speed_limit")}
+    events = tuple(e for e in log.events if e.t <= t + half)
+    return replace(log, **cut, events=events, termination=kind, termination_t=t), True
+
+
 def _score_lb1(log: EpisodeLog) -> EpisodeResult:
-    mon, _ = run_monitor(log)
+    log, _ = ended_by(log, LB1_RULES)
+    mon, _ = run_monitor(log, LB1_RULES)
+    return _scored(log, mon, list(penalised_infractions(log)))
+
+
+def _scored(log: EpisodeLog, mon, infractions: list[Infraction]) -> EpisodeResult:
+    """RC, the outside-lanes infraction (only when route advance was made off the lanes) and
+    2.0's minimum-speed infractions of a finished monitor, with ``infractions``."""
     rc = mon.completion_pct if mon is not None else 0.0
     pct = mon.outside_pct if mon is not None else 0.0
-    infractions = list(penalised_infractions(log))
     if mon is not None and mon.outside_m > 0:
-        end_t = log.t[-1]
-        infractions.append(Infraction(EventKind.OUTSIDE_ROUTE_LANES, 1.0 - pct / 100.0, end_t, mon.progress,
-                                      f"{mon.outside_m:.3f} m"))
-    return _result(log, rc, pct, tuple(infractions))
+        infractions.append(Infraction(EventKind.OUTSIDE_ROUTE_LANES, 1.0 - pct / 100.0, log.t[-1],
+                                      mon.progress, f"{mon.outside_m:.3f} m"))
+    for i, value in enumerate(mon.min_speed if mon is not None else ()):
+        if value < 100.0:
+            factor = 1.0 - (1.0 - MIN_SPEED_FACTOR) * (1.0 - value / 100.0)
+            infractions.append(Infraction(EventKind.MIN_SPEED, factor, log.t[-1], mon.progress,
+                                          f"checkpoint {i + 1}: {value:.2f}%"))
+    return _result(log, rc, pct, tuple(infractions), mon.outside_m if mon is not None else 0.0)
 
 
-def _result(log: EpisodeLog, rc: float, pct: float, infractions: tuple[Infraction, ...]) -> EpisodeResult:
+#: MinimumSpeedRouteTest's penalty value (2.0: PENALTY_PERC_DICT[MIN_SPEED_INFRACTION] = [0.7, 'decreases'])
+MIN_SPEED_FACTOR = 0.7
+
+
+def _score_lb2(log: EpisodeLog) -> EpisodeResult:
+    log, _ = ended_by(log, LB2_RULES)
+    mon, _ = run_monitor(log, LB2_RULES)
+    for e in log.events:
+        if e.kind not in EVENT_KINDS:
+            raise ValueError(f"unknown event kind {e.kind!r} at t={e.t} (known: {sorted(EVENT_KINDS)})")
+    chosen = counted_collisions_lb2(log) + [e for e in log.events
+                                            if e.kind in (EventKind.RED_LIGHT, EventKind.STOP_SIGN)]
+    events = [Infraction(kind=EventKind(e.kind), factor=PENALTIES[e.kind], t=e.t, pos=e.pos, other=e.other)
+              for e in sorted(chosen, key=lambda ev: ev.t)]
+    return _scored(log, mon, events)
+
+
+def _result(log: EpisodeLog, rc: float, pct: float, infractions: tuple[Infraction, ...],
+            outside_m: float = 0.0) -> EpisodeResult:
     """RC and DS rounded to 4 decimals, IS to 6, outside_lanes_pct to 4 and duration to 3, so
     results are stable across platforms."""
     if log.termination not in TERMINATIONS:
@@ -143,6 +255,7 @@ def _result(log: EpisodeLog, rc: float, pct: float, infractions: tuple[Infractio
         rc=round(rc, 4) + 0.0, is_=round(is_, 6) + 0.0, ds=round(rc * is_, 4) + 0.0,
         termination=Termination(log.termination), termination_class=TERMINATIONS[log.termination],
         infractions=infractions, outside_lanes_pct=round(pct, 4) + 0.0, duration=round(duration, 3) + 0.0,
+        outside_m=round(outside_m, 3) + 0.0,
     )
 
 
@@ -173,6 +286,8 @@ def register_scoring(scoring: Scoring) -> Scoring:
 
 register_scoring(Scoring("lb1", "CARLA Leaderboard 1.0 (branch leaderboard-1.0: statistics_manager.py, "
                                 "atomic_criteria.py)", _score_lb1))
+register_scoring(Scoring("lb2", "CARLA Leaderboard 2.0 (its statistics_manager.py, atomic_criteria.py, "
+                                "RouteTimeoutBehavior), where it applies to icrsumo's routes", _score_lb2))
 
 
 def scoring_names() -> Sequence[str]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 import re
 import textwrap
 from collections.abc import Iterable, Sequence
@@ -519,6 +520,118 @@ def leaderboard_checkpoint(records: Iterable[EpisodeRecord], agent: str, family:
     }
 
 
+#: Leaderboard 2.0's infraction keys (statistics_manager.py's PENALTY_NAME_DICT and route_timeout)
+LB2_INFRACTIONS = ("collisions_layout", "collisions_pedestrian", "collisions_vehicle", "red_light",
+                   "stop_infraction", "outside_route_lanes", "min_speed_infractions",
+                   "yield_emergency_vehicle_infractions", "scenario_timeouts", "route_dev", "vehicle_blocked",
+                   "route_timeout")
+_LB2_VALUE_KEYS = ("collisions_pedestrian", "collisions_vehicle", "collisions_layout", "red_light",
+                   "stop_infraction", "outside_route_lanes", "route_dev", "route_timeout",
+                   "vehicle_blocked", "yield_emergency_vehicle_infractions", "scenario_timeouts",
+                   "min_speed_infractions")
+_LB2_LABELS = [*_LB_LABELS, "Yield emergency vehicles infractions", "Scenario timeouts",
+               "Min speed infractions"]
+
+
+def _lb2_record(r: EpisodeRecord, index: int) -> dict:
+    infr: dict[str, list[str]] = {k: [] for k in LB2_INFRACTIONS}
+    if r.status == EpisodeStatus.CRASHED:
+        status = "Failed - Agent crashed" if "agent" in r.message.lower() else "Failed - Simulation crashed"
+    else:
+        status, key, msg = _LB_TERMINATION.get(r.termination, (f"Failed - {r.termination}", None, ""))
+        for kind, factor in r.infractions:
+            if kind == EventKind.OUTSIDE_ROUTE_LANES:
+                infr["outside_route_lanes"].append(
+                    f"Agent went outside its route lanes for about {r.outside_m:.3f} meters "
+                    f"({100.0 * (1.0 - factor):.2f}% of the completed route)")
+            elif kind == EventKind.MIN_SPEED:
+                value = 100.0 * (1.0 - (1.0 - factor) / 0.3)
+                infr["min_speed_infractions"].append(
+                    f"Average speed is {value:.2f}% of the surrounding traffic's one")
+            else:
+                lb_key, text = _LB_KIND.get(kind, ("collisions_layout", f"Agent infraction {kind}"))
+                infr[lb_key].append(f"{text} (penalty {factor:.2f})")
+        if key is not None:
+            infr[key].append(msg)
+        if status == "Completed" and not any(infr.values()):
+            status = "Perfect"
+    return {
+        "index": index,
+        "route_id": f"RouteScenario_{r.route_id}_{r.family}_{r.k}",
+        "status": status,
+        "num_infractions": sum(len(v) for v in infr.values()),
+        "infractions": infr,
+        "scores": {"score_route": round(r.rc, 6), "score_penalty": round(r.is_, 6),
+                   "score_composed": round(max(r.ds, 0.0), 6)},
+        "meta": {"route_length": round(r.length, 3), "duration_game": round(r.duration, 3),
+                 "duration_system": -1},
+    }
+
+
+def leaderboard_checkpoint_lb2(records: Iterable[EpisodeRecord], agent: str, family: str) -> dict:
+    """The episodes of one agent and family as a CARLA Leaderboard 2.0 results file.
+
+    Reproduces 2.0's ``statistics_manager.py`` (``compute_global_statistics``): statuses
+    'Perfect' (completed without any infraction), 'Completed' and 'Failed - ...'; the means
+    over every record rounded to 6 decimals and the sample standard deviations (around the
+    rounded means) to 3; infractions pooled over the routes: count / max(sum of RC / 100 x
+    route km, 0.001), except ``outside_route_lanes``, which is the km of route advance made off
+    the lanes; the global status drops Perfect -> Completed -> Failed; ``entry_status``
+    'Crashed' (not eligible) when a simulation crashed, else 'Finished'; ``duration_system`` is
+    -1 (not timed by wall clock)."""
+    mine = sorted((r for r in records if r.agent == agent and r.family == family),
+                  key=lambda r: (r.route_id, r.k, r.seed))
+    recs = [_lb2_record(r, i) for i, r in enumerate(mine)]
+    n = len(recs)
+    keys = ("score_composed", "score_route", "score_penalty")
+    means = {k: 0.0 for k in keys}
+    for rec in recs:
+        for k in keys:
+            means[k] += rec["scores"][k] / n
+    means = {k: round(v, 6) for k, v in means.items()}
+    std = {k: 0.0 for k in keys}
+    if n > 1:
+        std = {k: round(math.sqrt(sum((rec["scores"][k] - means[k]) ** 2 for rec in recs) / (n - 1)), 3)
+               for k in keys}
+    km = max(sum(r.length / 1000.0 * r.rc / 100.0 for r in mine), 0.001)
+    infr = {}
+    for k in LB2_INFRACTIONS:
+        if k == "outside_route_lanes":
+            infr[k] = round(sum(r.outside_m for r in mine if any(kind == EventKind.OUTSIDE_ROUTE_LANES
+                                                                 for kind, _ in r.infractions)) / 1000.0, 3)
+        else:
+            infr[k] = round(sum(len(rec["infractions"][k]) for rec in recs) / km, 3)
+    status, exceptions = "Perfect", []
+    for rec in recs:
+        if "Failed" in rec["status"]:
+            exceptions.append([rec["route_id"], rec["index"], rec["status"]])
+            status = "Failed"
+        elif status == "Perfect" and rec["status"] != "Perfect":
+            status = rec["status"]
+    global_record = {
+        "index": -1, "route_id": -1, "status": status, "infractions": infr,
+        "scores_mean": means, "scores_std_dev": std,
+        "meta": {"total_length": round(sum(r.length for r in mine), 3),
+                 "duration_game": round(sum(r.duration for r in mine), 3), "duration_system": -1,
+                 "exceptions": exceptions},
+    }
+    values = [str(means["score_composed"]), str(means["score_route"]), str(means["score_penalty"])] + [
+        str(infr[k]) for k in _LB2_VALUE_KEYS]
+    crashed = any("Simulation crashed" in rec["status"] for rec in recs)
+    return {
+        "_checkpoint": {"global_record": global_record, "progress": [n, n], "records": recs},
+        "entry_status": "Crashed" if crashed else "Finished",
+        "eligible": not crashed,
+        "sensors": [],
+        "values": values,
+        "labels": list(_LB2_LABELS),
+    }
+
+
+#: scoring name -> its leaderboard results file
+LEADERBOARD_FILES = {"lb1": leaderboard_checkpoint, "lb2": leaderboard_checkpoint_lb2}
+
+
 # --------------------------------------------------------------------------- all of it
 def _file_name(s: str) -> str:
     name = re.sub(r"[^A-Za-z0-9_.-]", "_", s)
@@ -558,9 +671,10 @@ def write_report(summary: dict, records: Sequence[EpisodeRecord], out_dir: Path,
     rd_to_plane(summary, out / "figures" / "rd_to.png")
     delta_bars(summary, out / "figures" / "delta_bars.png")
     fams = [BASELINE] + list(summary.get("families") or [])
+    checkpoint = LEADERBOARD_FILES[summary.get("scoring", "lb1")]
     for agent in summary["agents"]:
         for fam in fams:
-            cp = leaderboard_checkpoint(records, agent, fam)
+            cp = checkpoint(records, agent, fam)
             if cp["_checkpoint"]["records"]:
                 write_atomic(out / "leaderboard" / f"{_file_name(agent)}_{_file_name(fam)}.json",
                              dumps_json(cp))

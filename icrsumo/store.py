@@ -26,7 +26,7 @@ CREATE TABLE IF NOT EXISTS episodes (
     agent TEXT NOT NULL, route_id TEXT NOT NULL, family TEXT NOT NULL, k INTEGER NOT NULL,
     seed INTEGER NOT NULL, status TEXT NOT NULL, ds REAL, rc REAL, is_ REAL, termination TEXT,
     termination_class TEXT, infractions TEXT, length REAL, duration REAL, attempts INTEGER,
-    message TEXT, log BLOB,
+    message TEXT, log BLOB, outside_m REAL DEFAULT 0,
     PRIMARY KEY (agent, route_id, family, k, seed)
 );
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -59,6 +59,9 @@ class ResultStore:
             self._db.execute("PRAGMA synchronous=FULL")
             self._db.executescript(_SCHEMA)
             self._db.commit()
+            #: the episodes table's columns (a store written before ``outside_m`` lacks it until
+            #: the first write adds it)
+            self._cols = {r[1] for r in self._db.execute("PRAGMA table_info(episodes)")}
 
     @staticmethod
     def check(path: Path) -> None:
@@ -106,6 +109,9 @@ class ResultStore:
         row["log"] = zlib.compress(log_json.encode("utf-8"), 6) if log_json else None
         cols = _COLUMNS + ["log"]
         with self._guard("writing"):
+            if "outside_m" not in self._cols:
+                self._db.execute("ALTER TABLE episodes ADD COLUMN outside_m REAL DEFAULT 0")
+                self._cols.add("outside_m")
             self._db.execute(
                 f"INSERT OR REPLACE INTO episodes ({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})",
                 [row[c] for c in cols],
@@ -124,15 +130,18 @@ class ResultStore:
         """Every stored episode (or those of ``family``), sorted by key."""
         where, args = ("WHERE family = ?", (str(family),)) if family is not None else ("", ())
         with self._guard("reading"):
-            rows = self._db.execute(f"SELECT {', '.join(_COLUMNS)} FROM episodes {where} "
+            cols = [c for c in _COLUMNS if c in self._cols]
+            rows = self._db.execute(f"SELECT {', '.join(cols)} FROM episodes {where} "
                                     "ORDER BY agent, route_id, family, k, seed", args).fetchall()
         out = []
         for r in rows:
-            d = dict(zip(_COLUMNS, r))
+            d = dict(zip(cols, r))
+            if d.get("outside_m") is None:
+                d["outside_m"] = 0.0
             try:
                 if d["status"] == "done" and None in (d["ds"], d["rc"], d["is_"]):
                     raise TypeError("a finished episode without its scores")
-                for c in ("ds", "rc", "is_", "length", "duration", "k", "seed", "attempts"):
+                for c in ("ds", "rc", "is_", "length", "duration", "k", "seed", "attempts", "outside_m"):
                     if d[c] is not None and (not isinstance(d[c], (int, float)) or not math.isfinite(d[c])):
                         raise TypeError(f"{c} is {d[c]!r}, not a finite number")
                 raw = json.loads(d["infractions"] or "[]")

@@ -67,6 +67,10 @@ INITIAL_DELAY_S = 5.0
 OFF_LANES = 1
 #: ... or in a lane of the opposite direction (outside junctions)
 WRONG_LANE = 2
+#: the same by Leaderboard 2.0's rules: off the lanes by more than width / 2 + 0.5 m ...
+OFF_LANES_LB2 = 4
+#: ... or in a lane of the opposite direction (2.0's wrong-lane rule)
+WRONG_LANE_LB2 = 8
 
 #: Tolerance (s) of the time comparisons: logged times are rounded to 1e-3 s, so this only
 #: absorbs float noise such as 0.05 * 3600 != 180.0.
@@ -214,23 +218,63 @@ def route_timeout(route_length: float) -> float:
     return float(int(SECONDS_PER_M * route_length + INITIAL_DELAY_S))
 
 
+@dataclass(frozen=True)
+class RouteRules:
+    """The route criteria of one leaderboard version. ``outside_bits``: the per-step
+    ``outside`` bits its OutsideRouteLanesTest reads; ``completion_decimals``: RC rounded to
+    this many decimals before the > 99 % test (None: unrounded); ``timeout``: ``"route"``
+    (1.0: int(0.8 s/m x length + 5 s)) or ``"progress"`` (2.0's RouteTimeoutBehavior: 300 s,
+    plus the time to drive each metre of route advance at 10 % of the lane's speed limit);
+    ``min_speed_checkpoints``: MinimumSpeedRouteTest's checkpoints (0: no such test)."""
+
+    name: str
+    outside_bits: int
+    completion_decimals: int | None
+    timeout: str
+    min_speed_checkpoints: int
+
+
+#: Leaderboard 1.0's route criteria (scenario_runner, branch leaderboard-1.0)
+LB1_RULES = RouteRules("lb1", OFF_LANES | WRONG_LANE, None, "route", 0)
+#: Leaderboard 2.0's (scenario_runner's and leaderboard's 2.0 branches): RouteCompletionTest
+#: rounds to 2 decimals, RouteTimeoutBehavior, MinimumSpeedRouteTest(checkpoints=4)
+LB2_RULES = RouteRules("lb2", OFF_LANES_LB2 | WRONG_LANE_LB2, 2, "progress", 4)
+#: scoring name -> its route criteria
+ROUTE_RULES: dict[str, RouteRules] = {r.name: r for r in (LB1_RULES, LB2_RULES)}
+#: RouteTimeoutBehavior (2.0): MIN_TIMEOUT (s), TIMEOUT_ROUTE_PERC (%), window
+MIN_TIMEOUT_LB2 = 300.0
+TIMEOUT_ROUTE_PERC = 10.0
+TIMEOUT_WINDOW = 3
+
+
 class TerminationMonitor:
     """Decides, step by step, whether and why an episode ends, and keeps the leaderboard's route
-    bookkeeping (RC, route advance off the lanes).
+    bookkeeping (RC, route advance off the lanes, 2.0's minimum-speed checkpoints).
 
     Per step, :meth:`locate` (the ego centre, m) then :meth:`update` (time s, speed m/s, the
-    ``outside`` flags of :data:`OFF_LANES` / :data:`WRONG_LANE`, the step's events).
-    ``start_t`` is the simulation time from which the route timeout runs (the first logged
-    step's: :func:`replay` uses ``log.t[0]``). Once a kind has been returned the monitor is
-    finished and every later :meth:`update` returns the same kind.
+    ``outside`` bits, the step's events, and for 2.0's rules the other vehicles' mean speed and
+    the lane's speed limit, m/s). ``start_t`` is the simulation time from which the route
+    timeout runs (the first logged step's: :func:`replay` uses ``log.t[0]``). Once a kind has
+    been returned the monitor is finished and every later :meth:`update` returns the same kind;
+    :meth:`finish` closes the bookkeeping at the end of the route.
     """
 
-    def __init__(self, route: DenseRoute, start_t: float) -> None:
+    def __init__(self, route: DenseRoute, start_t: float, rules: RouteRules = LB1_RULES) -> None:
         if not math.isfinite(start_t):
             raise ValueError(f"start_t must be finite, got {start_t!r}")
         self.route = route
+        self.rules = rules
         self.start_t = float(start_t)
-        self.timeout = route_timeout(route.length)
+        self.timeout = route_timeout(route.length) if rules.timeout == "route" else MIN_TIMEOUT_LB2
+        self._timeout_index = 0
+        # MinimumSpeedRouteTest
+        checkpoints = rules.min_speed_checkpoints
+        self._checkpoint_m = route.length / checkpoints if checkpoints else 0.0
+        self._checkpoint_at = 0.0
+        self._speed_sums = [0.0, 0.0, 0]  # ego, traffic, points
+        #: MinimumSpeedRouteTest's percentages (ego mean speed over the traffic's, %), per checkpoint
+        self.min_speed: list[float] = []
+        self._finished = False
         self.result: tuple[Termination, float] | None = None
         self._last_t: float | None = None
         self._last_valid: float | None = None  # ActorSpeedAboveThresholdTest._time_last_valid_state
@@ -256,11 +300,14 @@ class TerminationMonitor:
 
     @property
     def completion_pct(self) -> float:
-        """RouteCompletionTest's percentage (0-100); 100 once the route is complete."""
+        """RouteCompletionTest's percentage (0-100, rounded as the rules round it); 100 once the
+        route is complete."""
         if self.completed:
             return 100.0
         total = self.route.length
-        return 100.0 * self.route.accum[self.completion_index] / total if total > 0 else 0.0
+        pct = 100.0 * self.route.accum[self.completion_index] / total if total > 0 else 0.0
+        dec = self.rules.completion_decimals
+        return pct if dec is None else round(pct, dec)
 
     @property
     def outside_pct(self) -> float:
@@ -285,8 +332,7 @@ class TerminationMonitor:
             if r.passed(i, x, y):
                 self.completion_index = i
         if not self.completed:
-            self.completed = (100.0 * r.accum[self.completion_index] / r.length > COMPLETION_PCT
-                              if r.length > 0 else True) and \
+            self.completed = (self.completion_pct > COMPLETION_PCT if r.length > 0 else True) and \
                 math.hypot(x - r.x[-1], y - r.y[-1]) < COMPLETION_RADIUS_M
         # InRouteTest: the nearest of the next points (the last of equals), its advance
         cur = self.in_route_index
@@ -309,8 +355,8 @@ class TerminationMonitor:
         self._deviated = self._deviated or off_route
         return self.progress
 
-    def update(self, t: float, speed: float, outside: int = 0,
-               events: Sequence[Event] = ()) -> Termination | None:
+    def update(self, t: float, speed: float, outside: int = 0, events: Sequence[Event] = (),
+               traffic_speed: float = -1.0, speed_limit: float = 0.0) -> Termination | None:
         """Termination kind at this step (after :meth:`locate`) or None.
 
         Order of checks: a sim_error event, an ego_teleport event ('stuck'), completed,
@@ -334,12 +380,53 @@ class TerminationMonitor:
                     gain = math.hypot(r.x[i] - r.x[j], r.y[i] - r.y[j])
                     self.lanes_index = i
                     self.driven_m += gain
-                    if outside:
+                    if outside & self.rules.outside_bits:
                         self.outside_m += gain
+        if self.rules.timeout == "progress" and not math.isnan(self._x):
+            self._progress_timeout(speed_limit)
+        if self.rules.min_speed_checkpoints and not math.isnan(self._x):
+            if r.accum[self.completion_index] - self._checkpoint_at > self._checkpoint_m:
+                self._close_checkpoint()
+                self._checkpoint_at = r.accum[self.completion_index]
+            if traffic_speed >= 0.0:
+                self._speed_sums[0] += speed
+                self._speed_sums[1] += traffic_speed
+                self._speed_sums[2] += 1
         kind = self._check(t, events, blocked)
         if kind is not None:
             self.result = (kind, t)
         return kind
+
+    def _progress_timeout(self, speed_limit: float) -> None:
+        """RouteTimeoutBehavior (2.0): the last of the next points passed adds the time to drive
+        its advance at 10 % of the speed limit (a limit of 0 adds nothing)."""
+        r, cur = self.route, self._timeout_index
+        new = cur
+        for i in range(cur, min(cur + TIMEOUT_WINDOW + 1, len(r.x))):
+            if r.passed(i, self._x, self._y):
+                new = i
+        if new > cur:
+            if speed_limit > 0.0:
+                self.timeout += (r.accum[new] - r.accum[cur]) / (speed_limit * TIMEOUT_ROUTE_PERC / 100.0)
+            self._timeout_index = new
+
+    def _close_checkpoint(self) -> None:
+        """MinimumSpeedRouteTest: the ego's mean speed over the traffic's since the last
+        checkpoint, in % rounded to 2 decimals (100 without samples or with standing traffic)."""
+        ego, traffic, n = self._speed_sums
+        self.min_speed.append(round(ego / n / (traffic / n) * 100.0, 2) if n and traffic != 0.0 else 100.0)
+        self._speed_sums = [0.0, 0.0, 0]
+
+    def finish(self) -> None:
+        """The route ended: MinimumSpeedRouteTest closes a last checkpoint when more than 95 % of
+        the route was driven (routes end near 99 %). Idempotent."""
+        if self._finished:
+            return
+        self._finished = True
+        r = self.route
+        if self.rules.min_speed_checkpoints and r.length > 0 and \
+                r.accum[self.completion_index] / r.length > 0.95:
+            self._close_checkpoint()
 
     def _check(self, t: float, events: Sequence[Event], blocked: bool) -> Termination | None:
         if events:
@@ -390,19 +477,28 @@ def dense_route(log: EpisodeLog) -> DenseRoute:
     return DenseRoute.from_polyline(log.route)
 
 
-def run_monitor(log: EpisodeLog) -> tuple[TerminationMonitor | None, tuple[Termination, float] | None]:
-    """The monitor run over the log's steps (None without steps) and the first ``(kind, t)`` it
-    decided, or, when no rule fired on the steps, the earliest sim_error / ego_teleport event
-    after the last step (sim_error first on a tie), or None."""
+def run_monitor(log: EpisodeLog, rules: RouteRules = LB1_RULES
+                ) -> tuple[TerminationMonitor | None, tuple[Termination, float] | None]:
+    """The monitor (by ``rules``) run over the log's steps (None without steps), finished, and
+    the first ``(kind, t)`` it decided, or, when no rule fired on the steps, the earliest
+    sim_error / ego_teleport event after the last step (sim_error first on a tie), or None.
+    2.0's rules need the log's ``traffic_speed`` and ``speed_limit`` columns (ValueError)."""
     by_step, trailing = events_by_step(log)
     mon = None
     if log.t:
-        mon = TerminationMonitor(dense_route(log), log.t[0])
+        if rules.timeout == "progress" and not (log.traffic_speed and log.speed_limit):
+            raise ValueError(f"{rules.name}'s rules need the traffic speed and speed limit of every step, "
+                             "which this log does not record")
+        mon = TerminationMonitor(dense_route(log), log.t[0], rules)
+        two = rules.timeout == "progress"
         for i, evs in enumerate(by_step):
             mon.locate(log.x[i], log.y[i])
-            kind = mon.update(log.t[i], log.speed[i], log.outside[i], evs)
+            kind = mon.update(log.t[i], log.speed[i], log.outside[i], evs,
+                              log.traffic_speed[i] if two else -1.0, log.speed_limit[i] if two else 0.0)
             if kind is not None:
+                mon.finish()
                 return mon, (kind, log.t[i])
+        mon.finish()
     ending = [e for e in trailing if e.kind in ENDING_EVENTS]
     if not ending:
         return mon, None
@@ -411,6 +507,6 @@ def run_monitor(log: EpisodeLog) -> tuple[TerminationMonitor | None, tuple[Termi
     return mon, (next(kind for ek, kind in ENDING_EVENTS.items() if ek in kinds), t0)
 
 
-def replay(log: EpisodeLog) -> tuple[Termination, float] | None:
+def replay(log: EpisodeLog, rules: RouteRules = LB1_RULES) -> tuple[Termination, float] | None:
     """The first ``(kind, t)`` the rules decide over the log (see :func:`run_monitor`)."""
-    return run_monitor(log)[1]
+    return run_monitor(log, rules)[1]

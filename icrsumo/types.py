@@ -242,11 +242,15 @@ class EpisodeLog:
     along the dense route, monotone: the last point passed), ``instruction`` (active
     instruction id, -1 none), ``outside`` (Leaderboard 1.0's OutsideRouteLanesTest flags of the
     step: bit 1 off every driving lane by more than lane width / 2 + 1.3 m, bit 2 in a lane of
-    the opposite direction; 0 inside the lanes), ``route_dist`` (m, ego centre to the nearest
+    the opposite direction; bits 4 and 8 the same by Leaderboard 2.0's rules; 0 inside the
+    lanes), ``route_dist`` (m, ego centre to the nearest
     of the next route points, as InRouteTest measures it). ``route_length`` (m): the dense
     route's length. ``route``: the route polyline (m; a third value per point: the lane's
     heading there, rad), from which the rules rebuild the dense route
-    (:class:`icrsumo.termination.DenseRoute`). ``termination`` is a
+    (:class:`icrsumo.termination.DenseRoute`). Per step too, for Leaderboard 2.0's rules:
+    ``traffic_speed`` (m/s, mean speed of the other vehicles, -1 when there are none) and
+    ``speed_limit`` (m/s, of the nearest driving lane); empty in logs that do not record them.
+    ``termination`` is a
     :class:`Termination`; ``t`` strictly increases, ``progress`` never decreases, and the
     route timeout runs from ``t[0]``.
     """
@@ -272,6 +276,8 @@ class EpisodeLog:
     termination_t: float
     message: str = ""
     route: tuple[tuple[float, ...], ...] = ()
+    traffic_speed: tuple[float, ...] = ()
+    speed_limit: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -287,7 +293,9 @@ class Infraction:
 
 @dataclass(frozen=True)
 class EpisodeResult:
-    """Leaderboard 1.0 scores of one episode: RC and DS in 0-100, IS in 0-1."""
+    """Leaderboard scores of one episode: RC and DS in 0-100, IS in 0-1; ``outside_lanes_pct``
+    (%) and ``outside_m`` (m): the route advance made off the driving lanes or against the
+    traffic, OutsideRouteLanesTest's."""
 
     route_id: str
     agent: str
@@ -301,6 +309,7 @@ class EpisodeResult:
     infractions: tuple[Infraction, ...]
     outside_lanes_pct: float
     duration: float
+    outside_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -310,7 +319,8 @@ class EpisodeRecord:
     ``family`` is "baseline" (k = 0) or a counterfactual family; ``status`` is "done" or
     "crashed" (scores are then 0 and ``message`` says why). DS and RC in 0-100, IS in 0-1;
     ``termination_class`` is done, RD or TO; ``infractions`` holds (kind, factor) pairs;
-    ``length`` (m) and ``duration`` (simulated s) describe the route and the episode.
+    ``length`` (m) and ``duration`` (simulated s) describe the route and the episode;
+    ``outside_m`` (m): the route advance made off the driving lanes or against the traffic.
     """
 
     agent: str
@@ -329,3 +339,4 @@ class EpisodeRecord:
     duration: float = 0.0
     attempts: int = 1
     message: str = ""
+    outside_m: float = 0.0

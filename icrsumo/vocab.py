@@ -28,6 +28,8 @@ class EventKind(StrEnum):
     SIM_ERROR = "sim_error"
     #: not an event: the infraction that OutsideRouteLanesTest's percentage becomes
     OUTSIDE_ROUTE_LANES = "outside_route_lanes"
+    #: not an event: a checkpoint of Leaderboard 2.0's MinimumSpeedRouteTest below 100 %
+    MIN_SPEED = "min_speed"
 
 
 class TerminationClass(StrEnum):

@@ -59,7 +59,7 @@ def test_rounding_and_key_order():
     assert list(d) == ["version", "route_id", "agent", "family", "k", "seed", "step_length", "route_length",
                        "termination", "termination_t", "message", "route", "steps", "events"]
     assert list(d["steps"]) == ["t", "x", "y", "yaw", "speed", "progress", "instruction", "outside",
-                                "route_dist"]
+                                "route_dist", "traffic_speed", "speed_limit"]
     assert d["steps"]["t"] == [0.1, 0.2, 0.3]
     assert d["steps"]["x"][0] == 1.23
     assert d["steps"]["yaw"][0] == 0.1234
@@ -124,7 +124,7 @@ def _bad(mutate) -> InputError:
     (lambda d: d["steps"].update(accel=[0, 0, 0]), "steps.accel"),
     (lambda d: d["steps"].update(t="0.1"), "steps.t"),
     (lambda d: d["steps"]["speed"].__setitem__(1, "fast"), "steps.speed[1]"),
-    (lambda d: d["steps"]["outside"].__setitem__(2, 4), "steps.outside[2]"),
+    (lambda d: d["steps"]["outside"].__setitem__(2, 16), "steps.outside[2]"),
     (lambda d: d["steps"]["instruction"].__setitem__(0, 1.5), "steps.instruction[0]"),
     (lambda d: d["steps"]["x"].pop(), "steps.x"),
     (lambda d: d["steps"]["t"].__setitem__(2, 0.2), "steps.t[2]"),
@@ -162,7 +162,7 @@ def test_result_round_trip():
     res = score_episode(log)
     d = result_to_dict(res)
     assert list(d) == ["route_id", "agent", "family", "k", "rc", "is", "ds", "termination",
-                       "termination_class", "outside_lanes_pct", "duration", "infractions"]
+                       "termination_class", "outside_lanes_pct", "duration", "outside_m", "infractions"]
     assert d["termination_class"] == "RD"
     # the flagged step passed the dense route's point 2 (1 m of the 2 m advanced): 50 % outside
     assert d["infractions"] == [["collision_vehicle", 0.6, 0.2, 1.5, "veh_7"],

@@ -108,3 +108,78 @@ def test_scoring_registry_refuses_duplicates_and_unknown_names():
         register_scoring(Scoring("lb1", "again", SCORINGS["lb1"].score))
     with pytest.raises(ValueError, match="unknown scoring"):
         score_episode(make_log(straight(3), ROUTE), "lb9")
+
+
+# ------------------------------------------------------------------ Leaderboard 2.0 (lb2)
+def lb2_log(xy, *, speed=None, traffic=10.0, limit=10.0, outside=None, events=(), termination="completed"):
+    """A log with 2.0's columns: the other vehicles' mean speed and the lane's speed limit (m/s)."""
+    from dataclasses import replace
+
+    log = make_log(xy, ROUTE, speed=speed, outside=outside, events=events, termination=termination)
+    return replace(log, traffic_speed=(traffic,) * len(xy), speed_limit=(limit,) * len(xy))
+
+
+def test_lb2_minimum_speed_checkpoints():
+    # 5 m/s against traffic at 10 m/s (0.25 m per step, x = 0.25 + 0.25 i): 4 checkpoints of
+    # 25 m; a checkpoint closes once the route advance since the last one exceeds 25 m (points
+    # 26, 52, 78) and at the end (100 % > 95 %): four times 50 % -> 1 - 0.3 x 0.5 = 0.85 each
+    xy = [(0.25 + 0.25 * i, 0.0) for i in range(402)]
+    res = score_episode(lb2_log(xy, speed=[5.0] * len(xy)), "lb2")
+    assert [str(i.kind) for i in res.infractions] == ["min_speed"] * 4
+    assert res.is_ == pytest.approx(0.85 ** 4, abs=1e-6) and res.rc == 100.0
+    # as fast as the traffic: no infraction; lb1 has no such test
+    same = lb2_log(xy, speed=[10.0] * len(xy))
+    assert score_episode(same, "lb2").infractions == ()
+    assert score_episode(lb2_log(xy, speed=[5.0] * len(xy)), "lb1").infractions == ()
+
+
+def test_lb2_route_timeout_grows_with_the_route_advance():
+    # 2.0: 300 s, plus each metre of advance at 10 % of the speed limit (10 m/s -> 1 s per m);
+    # 50 points passed -> 350 s; 1.0's budget for 100 m is int(85) s
+    from icrsumo.termination import LB2_RULES, DenseRoute, TerminationMonitor
+
+    mon = TerminationMonitor(DenseRoute.from_polyline(ROUTE), 0.0, LB2_RULES)
+    for i, (x, y) in enumerate(straight(101)):
+        mon.locate(x, y)
+        mon.update(0.05 * i, 10.0, 0, (), 10.0, 10.0)
+    assert mon.timeout == pytest.approx(350.0)
+
+
+def test_lb2_collisions_ignore_a_standing_ego_and_keep_one_place():
+    # veh1 at step 20 counts (x = 10.25); veh2 at step 28 (4 m away, within 2.0's 5 m) is
+    # ignored; veh3 at step 40 while the ego stands (speed 0.05) is ignored and remembers
+    # nothing; veh4 at step 60 (20 m on) counts: 0.6^2
+    speed = [10.0] * 201
+    speed[40] = 0.05
+    evs = (contact("collision_vehicle", 20, "veh1"), contact("collision_vehicle", 28, "veh2"),
+           contact("collision_vehicle", 40, "veh3"), contact("collision_vehicle", 60, "veh4"))
+    res = score_episode(lb2_log(straight(201), speed=speed, events=evs), "lb2")
+    assert [i.other for i in res.infractions if i.kind == "collision_vehicle"] == ["veh1", "veh4"]
+    # 1.0 counts veh3 (no speed rule) and veh2 is 4 m > 3 m away: all four
+    assert len(score_episode(lb2_log(straight(201), speed=speed, events=evs), "lb1").infractions) == 4
+
+
+def test_lb2_reads_its_own_outside_bits():
+    # bits 4 / 8 are 2.0's (lanes left beyond width / 2 + 0.5 m); bit 1 alone is 1.0's
+    xy = straight(201)
+    flags = [4 if 20 < x <= 40 else 1 if 60 < x <= 70 else 0 for x, _ in xy]
+    log = lb2_log(xy, outside=flags)
+    assert score_episode(log, "lb2").outside_lanes_pct == pytest.approx(20.0)
+    assert score_episode(log, "lb1").outside_lanes_pct == pytest.approx(10.0)
+
+
+def test_rescoring_under_rules_that_end_sooner_is_exact_and_later_is_flagged():
+    from icrsumo.metrics import ended_by
+    from icrsumo.termination import LB1_RULES, LB2_RULES
+
+    # recorded until 2.0's blocked rule (moving to step 100, then standing): 1.0's route
+    # timeout (85 s for 100 m) ends it sooner, at 85.05 s: the cut log is 1.0's run
+    n = 3702
+    xy = straight(101) + [(50.25, 0.0)] * (n - 101)
+    log = lb2_log(xy, speed=[10.0] * 101 + [0.0] * (n - 101), termination="agent_blocked")
+    cut, exact = ended_by(log, LB1_RULES)
+    assert exact and cut.termination == "route_timeout" and cut.t[-1] == 85.05
+    assert score_episode(log, "lb1").termination == "route_timeout"
+    # the other way: 2.0's rules would have run past 85 s, so the cut log is not their run
+    short, exact = ended_by(cut, LB2_RULES)
+    assert not exact and short is cut

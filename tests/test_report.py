@@ -183,6 +183,32 @@ def test_leaderboard_checkpoint():
     assert cb["status"] == "Failed - Agent got blocked" and len(cb["infractions"]["vehicle_blocked"]) == 1
 
 
+def test_leaderboard_2_results_file():
+    from icrsumo.report import leaderboard_checkpoint_lb2
+
+    recs = [rec("B", "r1", "misleading", 0, 100, 100, 1.0),                       # Perfect
+            rec("B", "r2", "misleading", 0, 85, 100, 0.85, infractions=(("min_speed", 0.85),)),
+            rec("B", "r3", "misleading", 0, 40, 50, 0.8, "RD",
+                infractions=(("outside_route_lanes", 0.8),), outside_m=50.0),
+            rec("B", "r4", "misleading", 0, status="crashed")]
+    cp = leaderboard_checkpoint_lb2(recs, "B", "misleading")
+    rs = cp["_checkpoint"]["records"]
+    assert [r["status"] for r in rs] == ["Perfect", "Completed", "Failed - Agent deviated from the route",
+                                         "Failed - Simulation crashed"]
+    assert rs[1]["infractions"]["min_speed_infractions"] == [
+        "Average speed is 50.00% of the surrounding traffic's one"]
+    # the metres off the lanes, where 2.0's global statistics read them
+    assert rs[2]["infractions"]["outside_route_lanes"][0].split(" ")[8] == "50.000"
+    g = cp["_checkpoint"]["global_record"]
+    assert g["status"] == "Failed"
+    assert g["scores_mean"]["score_composed"] == round((100 + 85 + 40 + 0) / 4, 6)
+    # pooled: counts over the km driven (0.5 + 0.5 + 0.25 + 0 km); outside lanes in km
+    assert g["infractions"]["route_dev"] == round(1 / 1.25, 3)
+    assert g["infractions"]["outside_route_lanes"] == 0.05
+    assert len(cp["values"]) == len(cp["labels"]) == 15
+    assert cp["entry_status"] == "Crashed" and cp["eligible"] is False
+
+
 def test_write_report(summary, tmp_path):
     recs = tiny()
     md = write_report(summary, recs, tmp_path)

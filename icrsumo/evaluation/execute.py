@@ -116,14 +116,14 @@ class EpisodeWorker:
         """Run one episode and score it; every failure becomes an Outcome."""
         from ..logs import dumps_log, loads_log
         from ..metrics import score_episode
-        from ..sim.episode import run_episode
+        from ..sim.episode import RunOptions, run_episode
 
         try:
             factory = self.factory(job)
             sc, iset = self._inputs(job)
             agent = WatchedAgent(factory(), self.watch)
             try:
-                log = run_episode(sc, iset, agent)
+                log = run_episode(sc, iset, agent, RunOptions(scoring=job.scoring))
             finally:
                 agent.close()  # the optional close() hook: e.g. a remote agent ends its session
             text = dumps_log(log)
@@ -153,7 +153,8 @@ def with_scores(rec: EpisodeRecord, r: EpisodeResult) -> EpisodeRecord:
     """``rec`` with the scores, termination, infractions and duration of ``r``."""
     return replace(rec, ds=r.ds, rc=r.rc, is_=r.is_, termination=r.termination,
                    termination_class=r.termination_class.value,
-                   infractions=tuple((i.kind, i.factor) for i in r.infractions), duration=r.duration)
+                   infractions=tuple((i.kind, i.factor) for i in r.infractions), duration=r.duration,
+                   outside_m=r.outside_m)
 
 
 def run_job(job: Job, watch: CallWatch | None = None) -> Outcome:

@@ -16,9 +16,11 @@ from .options import EvalOptions
 
 
 def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: list[EpisodeRecord],
-                  scenarios: Path, instr_dir: Path, not_shown: int = 0) -> dict:
+                  scenarios: Path, instr_dir: Path, not_shown: int = 0, rescored_short: int = 0) -> dict:
     """Write summary.json, tables and figures of ``records`` into ``out`` (the table is printed
-    unless ``opts.quiet``); returns the summary. ``not_shown``: episodes in the store that are
+    unless ``opts.quiet``); returns the summary. ``rescored_short``: rescored episodes that
+    ended before the report's scoring would have ended them (counted in the summary,
+    ``episodes.rescored_short``, and named on stderr). ``not_shown``: episodes in the store that are
     not of this evaluation (other agents, routes, families or k), counted in the summary
     (``episodes.stored_not_in_report``) and named on stderr, never dropped silently."""
     from ..aggregate import summarize
@@ -29,6 +31,11 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     summary = summarize(records, suite=opts.suite, seed=opts.seed, k=opts.k, families=families)
     summary["scoring"] = opts.scoring
     attribution = attach(summary, records, episode_decisions(store, records, instr_dir))
+    if rescored_short:
+        summary["episodes"]["rescored_short"] = rescored_short
+        print(f"icrsumo: note: {rescored_short} episodes ended, under the rules they were run with, "
+              f"before {opts.scoring}'s rules would have ended them: they are scored on what was simulated "
+              f"(run them with --scoring {opts.scoring} for the full episodes)", file=sys.stderr)
     if not_shown:
         summary["episodes"]["stored_not_in_report"] = not_shown
         print(f"icrsumo: note: {not_shown} stored episodes of other agents, routes, families or k are "

@@ -158,8 +158,9 @@ def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> d
         raise InputError("--scoring", scoring, "unknown scoring", f"use {', '.join(scoring_names())}")
     with ResultStore(out / "results.sqlite") as store:
         records = store.records()
+        inexact = 0
         if scoring is not None:
-            records = rescore(store, records, scoring)
+            records, inexact = rescore(store, records, scoring)
         elif stored_scoring is None:
             raise InputError(cfg_path, "scoring", "its episodes were scored before icrsumo scored by the "
                              "leaderboard's own rules", "run them again into another --out folder")
@@ -170,16 +171,22 @@ def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> d
                            traffic=str(cfg.get("traffic", "normal")), quiet=quiet,
                            scoring=scoring or stored_scoring)
         return write_outputs(opts, out, store, records, out / "scenarios" if (out / "scenarios").is_dir()
-                             else Path(cfg["suite"]), out / "instructions")
+                             else Path(cfg["suite"]), out / "instructions", rescored_short=inexact)
 
 
-def rescore(store: ResultStore, records: list[EpisodeRecord], scoring: str) -> list[EpisodeRecord]:
+def rescore(store: ResultStore, records: list[EpisodeRecord],
+            scoring: str) -> tuple[list[EpisodeRecord], int]:
     """``records`` with every finished episode scored again from its stored log under
-    ``scoring``; crashed episodes stay as they are. An InputError names a finished episode
-    whose log is missing or cannot be read (a rescored report never drops one silently)."""
+    ``scoring`` (:func:`icrsumo.metrics.score_episode`), and how many of them ended, under the
+    rules they were recorded with, before ``scoring``'s rules would have ended them (those are
+    scored on what was recorded; a fresh run with ``scoring`` would have simulated longer).
+    Crashed episodes stay as they are. An InputError names a finished episode whose log is
+    missing or cannot be read (a rescored report never drops one silently)."""
+    from ..metrics import ended_by
+    from ..termination import ROUTE_RULES
     from .execute import with_scores
 
-    out = []
+    out, short = [], 0
     for r in records:
         if r.status == EpisodeStatus.DONE:
             log = store.episode_log(r.agent, r.route_id, r.family, r.k, r.seed)
@@ -188,5 +195,6 @@ def rescore(store: ResultStore, records: list[EpisodeRecord], scoring: str) -> l
                                  "has no stored log to rescore",
                                  "run the evaluation again into another --out folder")
             r = with_scores(r, score_episode(log, scoring))
+            short += not ended_by(log, ROUTE_RULES[scoring])[1]
         out.append(r)
-    return out
+    return out, short

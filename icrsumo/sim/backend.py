@@ -266,11 +266,13 @@ class SumoBackend:
             vehicles = pedestrians = None
             if surroundings:
                 vehicles, pedestrians = self._surroundings(ls)
+            speeds = [ls.vehicle.getSpeed(v) for v in ls.vehicle.getIDList() if v != EGO_ID]
             return SimFrame(t=t, ego_present=True, lane=lane,
                             lane_pos=float(sub.get(self._pos_var, 0.0)), contacts=contacts,
                             any_collision=bool(colls),
                             teleports=teleports, tl_states=tl_states, vehicles=vehicles,
-                            pedestrians=pedestrians)
+                            pedestrians=pedestrians,
+                            traffic_speed=math.fsum(speeds) / len(speeds) if speeds else -1.0)
 
     def _surroundings(self, ls) -> tuple[np.ndarray, np.ndarray]:
         """Vehicles (N, 5: centre x, y, yaw, length, width) and pedestrians (M, 2) within the

@@ -24,8 +24,9 @@ if TYPE_CHECKING:
 class StepRecord(NamedTuple):
     """One recorded simulation step: time ``t`` (s), ego centre ``x``/``y`` (m), ``yaw`` (rad),
     ``speed`` (m/s), route ``progress`` (m), active ``instruction`` id (-1 none), ``outside``
-    (OutsideRouteLanesTest's bits, see :class:`~icrsumo.types.EpisodeLog`), ``route_dist`` (m)
-    and the step's ``events``."""
+    (OutsideRouteLanesTest's bits, see :class:`~icrsumo.types.EpisodeLog`), ``route_dist`` (m),
+    the step's ``events``, ``traffic_speed`` (m/s, mean of the other vehicles, -1 none) and
+    ``speed_limit`` (m/s, of the nearest driving lane)."""
 
     t: float
     x: float
@@ -37,6 +38,8 @@ class StepRecord(NamedTuple):
     outside: int
     route_dist: float
     events: tuple[Event, ...]
+    traffic_speed: float = -1.0
+    speed_limit: float = 0.0
 
 
 class EpisodeCallback:
@@ -68,6 +71,8 @@ class EpisodeCallback:
 
 
 _COLUMNS = ("t", "x", "y", "yaw", "speed", "progress", "instruction", "outside", "route_dist")
+#: the StepRecord fields after ``events`` that are columns too
+_LATE_COLUMNS = ("traffic_speed", "speed_limit")
 
 
 class LogRecorder(EpisodeCallback):
@@ -75,13 +80,15 @@ class LogRecorder(EpisodeCallback):
     recorded step by step; the loop adds the events that end an episode off a step."""
 
     def __init__(self) -> None:
-        self.cols: dict[str, list] = {k: [] for k in _COLUMNS}
+        self.cols: dict[str, list] = {k: [] for k in (*_COLUMNS, *_LATE_COLUMNS)}
         self.events: list[Event] = []
         self._append = [self.cols[k].append for k in _COLUMNS]
 
     def on_step(self, episode: Episode, step: StepRecord) -> None:
         for append, value in zip(self._append, step):
             append(value)
+        self.cols["traffic_speed"].append(step.traffic_speed)
+        self.cols["speed_limit"].append(step.speed_limit)
         if step.events:
             self.events += step.events
 

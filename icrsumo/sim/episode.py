@@ -31,7 +31,7 @@ from ..dynamics import Control, EgoState, VehicleParams, step
 from ..networks import load_net
 from ..render import BevRenderer, BevSpec
 from ..scenario import Scenario
-from ..termination import DenseRoute, TerminationMonitor, route_timeout
+from ..termination import MIN_TIMEOUT_LB2, ROUTE_RULES, DenseRoute, TerminationMonitor, route_timeout
 from ..types import EgoRoute, EpisodeLog, Event, InstructionSet, LanePos
 from ..vocab import EventKind, Termination
 from .backend import SimulatorError, SumoBackend
@@ -47,11 +47,13 @@ CONTROL_EVERY = 2
 
 @dataclass(frozen=True)
 class RunOptions:
-    """Episode options: agent rate (``control_every`` SUMO steps per agent decision) and the
-    BEV spec of the agent's raster (it changes what the agent sees, never the scoring)."""
+    """Episode options: agent rate (``control_every`` SUMO steps per agent decision), the
+    BEV spec of the agent's raster (it changes what the agent sees, never the scoring) and the
+    scoring whose route criteria end the episode (:data:`icrsumo.termination.ROUTE_RULES`)."""
 
     control_every: int = CONTROL_EVERY
     bev: BevSpec = BevSpec()
+    scoring: str = "lb1"
 
 
 @cache
@@ -129,7 +131,12 @@ class Episode:
         self.monitor: TerminationMonitor | None = None
         self.action = Action(control=Control(brake=1.0))
         self._path: WaypointPath | None = None
-        self.n_max = int((route_timeout(self.route.length) + 10.0) / self.dt) + 10
+        self.rules = ROUTE_RULES[options.scoring]
+        # a bound on the steps (the monitor ends the episode first): 2.0's timeout grows with the
+        # route advance at 10 % of the speed limit (>= 1 m/s here)
+        budget = route_timeout(self.route.length) if self.rules.timeout == "route" else \
+            MIN_TIMEOUT_LB2 + self.route.length / 0.1
+        self.n_max = int((budget + 10.0) / self.dt) + 10
         self.k_instr = -1
         self.i = 0
         #: the ego's lane -> the lights the sensors need in this step's frame
@@ -186,7 +193,7 @@ class Episode:
             self.state = EgoState(sx - 0.5 * params.length * math.cos(sh),
                                   sy - 0.5 * params.length * math.sin(sh), sh)
             backend.insert_ego(sx, sy, sh)
-            self.monitor = TerminationMonitor(self.route, round(backend.time, 3))
+            self.monitor = TerminationMonitor(self.route, round(backend.time, 3), self.rules)
             for cb in self.callbacks:
                 cb.on_ready(self)
             return self._advance()
@@ -252,10 +259,12 @@ class Episode:
         self.sensor_state = ss
         k = self.k_instr = _active(self.triggers, progress)
         rec = StepRecord(t, state.x, state.y, state.yaw, state.speed, progress,
-                         self.instr[k].id if k >= 0 else -1, ss.outside, mon.route_dist, tuple(events))
+                         self.instr[k].id if k >= 0 else -1, ss.outside, mon.route_dist, tuple(events),
+                         frame.traffic_speed, ss.speed_limit)
         for cb in self.callbacks:
             cb.on_step(self, rec)
-        done = mon.update(t, speed, ss.outside, events)
+        done = mon.update(t, speed, ss.outside, events, round(frame.traffic_speed, 3) + 0.0,
+                          round(ss.speed_limit, 2) + 0.0)
         if done:
             self._finish(Termination(done), t)
             return True
@@ -301,6 +310,7 @@ class Episode:
             yaw=tuple(cols["yaw"]), speed=tuple(cols["speed"]), progress=tuple(cols["progress"]),
             instruction=tuple(cols["instruction"]), outside=tuple(cols["outside"]),
             route_dist=tuple(cols["route_dist"]), events=tuple(self.recorder.events),
+            traffic_speed=tuple(cols["traffic_speed"]), speed_limit=tuple(cols["speed_limit"]),
             termination=self.termination, termination_t=self.term_t, message=self.message,
             route=self.polyline,
         )

@@ -40,7 +40,9 @@ class SimFrame:
     surroundings, else the lights the reader asked for. ``vehicles``
     (N, 5): other vehicles within the context radius, centre x, y (m), yaw (rad), length,
     width (m); ``pedestrians`` (M, 2): person centres (m); both are None on frames read
-    without the surroundings.
+    without the surroundings. ``traffic_speed``: the mean speed (m/s) of every other vehicle in
+    the simulation (Leaderboard 2.0's MinimumSpeedRouteTest compares the ego with it), -1 when
+    there is none.
     """
 
     t: float
@@ -53,6 +55,7 @@ class SimFrame:
     tl_states: Mapping[str, str] = field(default_factory=lambda: NO_LIGHTS)
     vehicles: np.ndarray | None = None
     pedestrians: np.ndarray | None = None
+    traffic_speed: float = -1.0
 
 
 def frame_to_dict(frame: SimFrame) -> dict:
@@ -60,7 +63,7 @@ def frame_to_dict(frame: SimFrame) -> dict:
     return {"t": frame.t, "ego_present": frame.ego_present, "lane": frame.lane, "lane_pos": frame.lane_pos,
             "contacts": [[c.other, c.pedestrian] for c in frame.contacts],
             "any_collision": frame.any_collision, "teleports": list(frame.teleports),
-            "tl_states": dict(frame.tl_states)}
+            "tl_states": dict(frame.tl_states), "traffic_speed": frame.traffic_speed}
 
 
 def frame_from_dict(d: dict) -> SimFrame:
@@ -69,4 +72,4 @@ def frame_from_dict(d: dict) -> SimFrame:
                     lane_pos=float(d["lane_pos"]),
                     contacts=tuple(Contact(str(o), bool(p)) for o, p in d["contacts"]),
                     any_collision=bool(d["any_collision"]), teleports=tuple(d["teleports"]),
-                    tl_states=dict(d["tl_states"]))
+                    tl_states=dict(d["tl_states"]), traffic_speed=float(d.get("traffic_speed", -1.0)))

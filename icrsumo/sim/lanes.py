@@ -14,6 +14,10 @@ with SUMO's lanes for CARLA's map queries:
   right after a junction the ego's heading is compared with the lane's (120 degrees or more
   apart: wrong), elsewhere a jump of the lane direction between 150 and 210 degrees (crossing
   the centre line) flips the state, and any other change clears it.
+
+Leaderboard 2.0's test (``lb2``; scenario_runner's 2.0 ``atomic_criteria.py``) differs in
+two rules, kept beside: lanes are left beyond width / 2 + 0.5 m, and away from junctions only
+a jump strictly between 150 and 210 degrees flips the state, which nothing else clears.
 """
 
 from __future__ import annotations
@@ -26,8 +30,9 @@ import numpy as np
 
 from ..networks import RoadNet
 
-#: OutsideRouteLanesTest.ALLOWED_OUT_DISTANCE (m)
+#: OutsideRouteLanesTest.ALLOWED_OUT_DISTANCE (m), Leaderboard 1.0 and 2.0
 ALLOWED_OUT_DISTANCE = 1.3
+ALLOWED_OUT_DISTANCE_LB2 = 0.5
 #: OutsideRouteLanesTest.MAX_ALLOWED_VEHICLE_ANGLE (degrees)
 MAX_ALLOWED_VEHICLE_ANGLE = 120.0
 #: OutsideRouteLanesTest.MAX_ALLOWED_WAYPOINT_ANGLE (degrees)
@@ -39,14 +44,15 @@ CELL_M = 10.0
 @dataclass(frozen=True)
 class LanePoint:
     """The nearest point of a driving lane: ``lane`` id, ``dist`` (m) from the query point,
-    lane ``heading`` there (rad, counter-clockwise from +x), lane ``width`` (m), and whether the
-    lane lies inside a junction."""
+    lane ``heading`` there (rad, counter-clockwise from +x), lane ``width`` (m), whether the
+    lane lies inside a junction, and its ``speed_limit`` (m/s)."""
 
     lane: str
     dist: float
     heading: float
     width: float
     junction: bool
+    speed_limit: float = 0.0
 
 
 class DrivingLanes:
@@ -66,6 +72,7 @@ class DrivingLanes:
             lane_idx.append(np.full(len(shape) - 1, i))
         self.ids = ids
         self.width = [float(sn.getLane(lid).getWidth()) for lid in ids]
+        self.speed = [float(sn.getLane(lid).getSpeed()) for lid in ids]
         self.a = np.concatenate(a)
         self.ab = np.concatenate(b) - self.a
         self.den = np.maximum((self.ab ** 2).sum(axis=1), 1e-12)
@@ -102,11 +109,14 @@ class DrivingLanes:
             s, d = self._best(x, y, self._all)
         li = int(self.lane[s])
         lane = self.ids[li]
-        return LanePoint(lane, d, float(self.heading[s]), self.width[li], lane.startswith(":"))
+        return LanePoint(lane, d, float(self.heading[s]), self.width[li], lane.startswith(":"),
+                         self.speed[li])
 
-    def off_lanes(self, p: LanePoint) -> bool:
-        """``_is_outside_driving_lanes``: farther than width / 2 + 1.3 m from the nearest lane."""
-        return p.dist > p.width / 2.0 + ALLOWED_OUT_DISTANCE
+    @staticmethod
+    def off_lanes(p: LanePoint, allowed: float = ALLOWED_OUT_DISTANCE) -> bool:
+        """``_is_outside_driving_lanes``: farther than width / 2 + ``allowed`` m (1.3 m: 1.0's,
+        0.5 m: 2.0's) from the nearest lane."""
+        return p.dist > p.width / 2.0 + allowed
 
 
 @dataclass(frozen=True)
@@ -123,9 +133,10 @@ def _deg(rad: float) -> float:
     return math.degrees(rad) % 360.0
 
 
-def wrong_lane_step(state: WrongLaneState, p: LanePoint, yaw: float) -> WrongLaneState:
-    """The wrong-lane state after a step at lane point ``p`` with the ego heading ``yaw`` (rad).
-    Before the first step the previous point is ``p`` itself (CARLA takes it at the start)."""
+def wrong_lane_step(state: WrongLaneState, p: LanePoint, yaw: float, lb2: bool = False) -> WrongLaneState:
+    """The wrong-lane state after a step at lane point ``p`` with the ego heading ``yaw`` (rad),
+    by Leaderboard 1.0's rule (2.0's with ``lb2``). Before the first step the previous point is
+    ``p`` itself (CARLA takes it at the start)."""
     pre = state.pre if state.pre is not None else p
     wrong = state.wrong
     if p.junction:
@@ -136,7 +147,10 @@ def wrong_lane_step(state: WrongLaneState, p: LanePoint, yaw: float) -> WrongLan
             wrong = not (angle < MAX_ALLOWED_VEHICLE_ANGLE or angle > 360.0 - MAX_ALLOWED_VEHICLE_ANGLE)
         else:  # a big jump of the lane direction: crossing into (or back from) the other side
             angle = (_deg(pre.heading) - _deg(p.heading)) % 360.0
-            if MAX_ALLOWED_WAYPOINT_ANGLE <= angle <= 360.0 - MAX_ALLOWED_WAYPOINT_ANGLE:
+            if lb2:
+                if MAX_ALLOWED_WAYPOINT_ANGLE < angle < 360.0 - MAX_ALLOWED_WAYPOINT_ANGLE:
+                    wrong = not wrong
+            elif MAX_ALLOWED_WAYPOINT_ANGLE <= angle <= 360.0 - MAX_ALLOWED_WAYPOINT_ANGLE:
                 wrong = not wrong
             else:
                 wrong = False

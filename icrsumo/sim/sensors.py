@@ -25,12 +25,12 @@ import numpy as np
 
 from ..dynamics import EgoState
 from ..networks import RoadNet
-from ..termination import OFF_LANES, WRONG_LANE
+from ..termination import OFF_LANES, OFF_LANES_LB2, WRONG_LANE, WRONG_LANE_LB2
 from ..types import Event
 from ..vocab import EventKind
 from .drivable import DrivableArea
 from .frame import NO_LIGHTS, SimFrame
-from .lanes import DrivingLanes, WrongLaneState, wrong_lane_step
+from .lanes import ALLOWED_OUT_DISTANCE_LB2, DrivingLanes, WrongLaneState, wrong_lane_step
 
 #: an approach to a stop sign counts as stopped below this speed (m/s) within this distance (m)
 STOP_SPEED, STOP_ZONE = 0.1, 15.0
@@ -92,9 +92,11 @@ class LaneHeading:
 
 @dataclass(frozen=True)
 class SensorState:
-    """The sensors' memory after a step. ``outside`` holds this step's
-    :data:`~icrsumo.termination.OFF_LANES` / :data:`~icrsumo.termination.WRONG_LANE` bits
-    (OutsideRouteLanesTest, :mod:`icrsumo.sim.lanes`); ``lane_state``: its wrong-lane memory;
+    """The sensors' memory after a step. ``outside`` holds this step's OutsideRouteLanesTest
+    bits (:mod:`icrsumo.sim.lanes`): :data:`~icrsumo.termination.OFF_LANES` /
+    :data:`~icrsumo.termination.WRONG_LANE` by Leaderboard 1.0's rules, ``OFF_LANES_LB2`` /
+    ``WRONG_LANE_LB2`` by 2.0's; ``lane_state`` / ``lane_state_lb2``: the wrong-lane memories;
+    ``speed_limit``: the speed limit (m/s) of the nearest driving lane;
     ``prev_lane``: the last lane SUMO placed the ego on; ``stopped``: lanes whose stop zone the
     ego stood in since it entered them; ``roadside`` / ``wrong``: footprint off the drivable
     area / heading against SUMO's lane at this step; ``lights``: the states at this step of the
@@ -102,6 +104,8 @@ class SensorState:
 
     outside: int = 0
     lane_state: WrongLaneState = WrongLaneState()
+    lane_state_lb2: WrongLaneState = WrongLaneState()
+    speed_limit: float = 0.0
     prev_lane: str = ""
     stopped: frozenset[str] = frozenset()
     roadside: bool = False
@@ -190,9 +194,13 @@ class Sensors:
         # OutsideRouteLanesTest's lane facts
         point = self.lanes.nearest(ego.x, ego.y)
         lane_state = wrong_lane_step(state.lane_state, point, ego.yaw)
-        outside = (OFF_LANES if self.lanes.off_lanes(point) else 0) | (WRONG_LANE if lane_state.wrong else 0)
+        lane_state2 = wrong_lane_step(state.lane_state_lb2, point, ego.yaw, lb2=True)
+        outside = ((OFF_LANES if self.lanes.off_lanes(point) else 0) | (WRONG_LANE if lane_state.wrong else 0)
+                   | (OFF_LANES_LB2 if self.lanes.off_lanes(point, ALLOWED_OUT_DISTANCE_LB2) else 0)
+                   | (WRONG_LANE_LB2 if lane_state2.wrong else 0))
         prev_lane = lane or prev
         # the lights the next step's red-light check reads: those ahead of prev_lane, now
         tls = self.tls_ahead(prev_lane)
         lights = {tl: frame.tl_states[tl] for tl in tls} if tls else NO_LIGHTS
-        return ev, SensorState(outside, lane_state, prev_lane, stopped, off, wrong, lights)
+        return ev, SensorState(outside, lane_state, lane_state2, point.speed_limit, prev_lane, stopped, off,
+                               wrong, lights)
