@@ -105,10 +105,15 @@ class DenseRoute:
         pieces at the segments that join two lanes (a segment more than
         :data:`JOIN_RAD` off the heading of its first vertex: a lane change's sideways step, a
         junction lane that starts off the end of the lane before it). Each piece is sampled on
-        its own, a join is one step from the last point of a piece to the first of the next
-        (as the leaderboard's route has one waypoint on each lane of a lane change), and the
-        start of a piece that lies behind the end of the one before (along that one's heading)
-        is cut off there, so no stretch of road is counted twice."""
+        its own. A join between lanes of about the same heading that moves at most
+        :data:`LANE_CHANGE_FORWARD_M` forward (a lane change) is one step from the last point of
+        a piece to the first of the next, as the leaderboard's route has one waypoint on each
+        lane; a longer one (a gap in the road's shape) is sampled along its line; a join between
+        lanes more than :data:`TURN_JOIN_RAD` apart (a
+        junction whose lane shape does not meet the lanes) becomes a straight cut from
+        :data:`TURN_CUT_M` m before the end of the lane it leaves, sampled in its own direction.
+        Points that double back along the road just driven are dropped
+        (:func:`_drop_overlaps`)."""
         pts: list[tuple[float, float]] = []
         heads: list[float | None] = []
         for p in polyline:
@@ -121,19 +126,14 @@ class DenseRoute:
                 heads.append(h)
         if not pts:
             raise ValueError("the route has no points")
-        pieces = _lane_pieces(pts, heads)
-        xs: list[float] = []
-        ys: list[float] = []
-        fxs: list[float] = []
-        fys: list[float] = []
-        for piece in pieces:
-            for x, y, fx, fy in _sample(piece):
-                if xs and (x, y) == (xs[-1], ys[-1]):
-                    continue
-                xs.append(x)
-                ys.append(y)
-                fxs.append(fx)
-                fys.append(fy)
+        samples: list[tuple[float, float, float, float]] = []
+        for piece in _lane_pieces(pts, heads):
+            for p in _sample(piece):
+                if not samples or p[:2] != samples[-1][:2]:
+                    samples.append(p)
+        if all(h is not None for h in heads):
+            samples = _drop_overlaps(samples)
+        xs, ys, fxs, fys = (list(c) for c in zip(*samples))
         accum = [0.0]
         for i in range(1, len(xs)):
             accum.append(accum[-1] + math.hypot(xs[i] - xs[i - 1], ys[i] - ys[i - 1]))
@@ -151,37 +151,83 @@ class DenseRoute:
 
 #: a segment more than this far off its first vertex's lane heading joins two lanes (rad)
 JOIN_RAD = math.radians(10.0)
+#: lanes whose headings differ by more than this (rad) are joined by a turn, which a straight
+#: cut stands for (a junction whose lane shape does not meet the lanes), starting this far (m)
+#: before the end of the lane it leaves, as a driver turns in before the corner
+TURN_JOIN_RAD = math.radians(45.0)
+TURN_CUT_M = 5.0
+#: a join between lanes of about the same heading that moves at most this far (m) forward is a
+#: lane change's sideways step (one step); a longer one is a gap in the road's shape, sampled
+LANE_CHANGE_FORWARD_M = 2.0
+#: a dense point doubling back less than this far (m) behind the last one kept ...
+OVERLAP_BACK_M = 20.0
+#: ... and less than this far (m) beside its line is dropped (:func:`_drop_overlaps`)
+OVERLAP_SIDE_M = 2.0
 
 _Piece = list[tuple[float, float, float | None]]
 
 
 def _lane_pieces(pts: list[tuple[float, float]], heads: list[float | None]) -> list[_Piece]:
-    """The polyline cut into lane pieces (see :meth:`DenseRoute.from_polyline`): lists of
-    (x, y, heading or None)."""
+    """The polyline cut into lane pieces at its joins (see :meth:`DenseRoute.from_polyline`):
+    lists of (x, y, heading or None)."""
     if any(h is None for h in heads):
         return [[(x, y, None) for x, y in pts]]
     pieces: list[_Piece] = [[(pts[0][0], pts[0][1], heads[0])]]
     for i in range(1, len(pts)):
         (ax, ay), (bx, by), h = pts[i - 1], pts[i], heads[i - 1]
         d = math.atan2(by - ay, bx - ax)
-        off = abs((d - h + math.pi) % (2.0 * math.pi) - math.pi)
-        if off > JOIN_RAD:
+        if _angle(d, h) > JOIN_RAD:
+            forward = (bx - ax) * math.cos(h) + (by - ay) * math.sin(h)
+            if _angle(heads[i], h) > TURN_JOIN_RAD:  # a turn with no lane shape: a straight cut
+                a = _cut_tail(pieces[-1], TURN_CUT_M) if len(pieces[-1]) > 1 else pieces[-1][-1]
+                d = math.atan2(by - a[1], bx - a[0])
+                pieces.append([(a[0], a[1], d), (bx, by, d)])
+            elif forward > LANE_CHANGE_FORWARD_M:  # a gap along the road: driven straight on
+                pieces.append([(ax, ay, d), (bx, by, d)])
             pieces.append([])
         pieces[-1].append((bx, by, heads[i]))
-    out: list[_Piece] = [pieces[0]]
-    for piece in pieces[1:]:
-        ex, ey, eh = out[-1][-1]
-        ux, uy = math.cos(eh), math.sin(eh)
-        ahead = [(x - ex) * ux + (y - ey) * uy for x, y, _ in piece]
-        k = next((i for i, a in enumerate(ahead) if a > 0.0), None)
-        if k is None:  # wholly behind the end of the road so far
-            continue
-        if k > 0:  # cut where the piece passes the end of the one before
-            (x0, y0, h0), (x1, y1, _) = piece[k - 1], piece[k]
-            u = -ahead[k - 1] / (ahead[k] - ahead[k - 1])
-            piece = [(x0 + (x1 - x0) * u, y0 + (y1 - y0) * u, h0)] + piece[k:]
-        out.append(piece)
-    return out
+    return pieces
+
+
+def _cut_tail(piece: _Piece, length: float) -> tuple[float, float, float | None]:
+    """Shorten ``piece`` (in place) by ``length`` m of arc, keeping its first point; its new
+    last point."""
+    left = length
+    while len(piece) > 1:
+        (ax, ay, h), (bx, by, _) = piece[-2], piece[-1]
+        seg = math.hypot(bx - ax, by - ay)
+        if seg > left:
+            u = 1.0 - left / seg
+            piece[-1] = (ax + (bx - ax) * u, ay + (by - ay) * u, h)
+            break
+        left -= seg
+        piece.pop()
+    return piece[-1]
+
+
+def _angle(a: float, b: float) -> float:
+    """|a - b| wrapped to [0, pi] (rad)."""
+    return abs((a - b + math.pi) % (2.0 * math.pi) - math.pi)
+
+
+_Point = tuple[float, float, float, float]
+
+
+def _drop_overlaps(points: list[_Point]) -> list[_Point]:
+    """The dense points without those that double back along the road just driven: a point
+    less than :data:`OVERLAP_BACK_M` behind the last point kept (along its direction) and less
+    than :data:`OVERLAP_SIDE_M` beside that line (a junction lane that starts behind the end of
+    the lane before it). A later visit of the same road is farther back and stays."""
+    kept: list[_Point] = []
+    for p in points:
+        if kept:
+            kx, ky, fx, fy = kept[-1]
+            dx, dy = p[0] - kx, p[1] - ky
+            along, side = dx * fx + dy * fy, abs(dx * fy - dy * fx)
+            if -OVERLAP_BACK_M < along < 0.0 and side < OVERLAP_SIDE_M:
+                continue
+        kept.append(p)
+    return kept
 
 
 def _sample(piece: _Piece) -> list[tuple[float, float, float, float]]:
