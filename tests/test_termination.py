@@ -178,3 +178,46 @@ def test_monitor_is_final_and_time_must_increase():
     fresh.update(1.0, 5.0)
     with pytest.raises(ValueError, match="backwards"):
         fresh.update(0.5, 5.0)
+
+
+# ------------------------------------------------------------------ the dense route's lane pieces
+def _dense(points):
+    r = DenseRoute.from_polyline(points)
+    return list(zip(r.x, r.y)), [round(math.degrees(math.atan2(fy, fx))) for fx, fy in zip(r.fx, r.fy)]
+
+
+def test_a_lane_change_step_is_one_step_with_the_lanes_direction():
+    # east on y = 0 to x = 3, then the next lane starts 3.5 m to the left at x = 3 (the polyline
+    # steps sideways): one step, every point pointing east (the ego passes them as it drives on)
+    pts, dirs = _dense([(0.0, 0.0, 0.0), (3.0, 0.0, 0.0), (3.0, 3.5, 0.0), (6.0, 3.5, 0.0)])
+    assert pts == [(0.0, 0.0), (1.0, 0.0), (2.0, 0.0), (3.0, 0.0),
+                   (3.0, 3.5), (4.0, 3.5), (5.0, 3.5), (6.0, 3.5)]
+    assert set(dirs) == {0}
+
+
+def test_a_gap_along_the_road_is_driven_straight_on():
+    # the next lane starts 10 m further ahead: the gap is sampled (1 m hops), not one 10 m step
+    pts, _ = _dense([(0.0, 0.0, 0.0), (2.0, 0.0, 0.0), (12.0, 0.5, 0.0), (14.0, 0.5, 0.0)])
+    gaps = [math.dist(a, b) for a, b in zip(pts, pts[1:])]
+    assert max(gaps) <= 1.0 + 1e-9
+
+
+def test_a_turn_without_a_lane_shape_is_cut_from_5_m_before_the_corner():
+    # south to (0, 0), then a lane heading east that starts at (10, 2): the straight cut starts
+    # 5 m before the corner, at (0, 5), and runs in its own direction
+    south = -math.pi / 2
+    pts, dirs = _dense([(0.0, 20.0, south), (0.0, 0.0, south), (10.0, 2.0, 0.0), (20.0, 2.0, 0.0)])
+    assert (0.0, 5.0) in pts and (0.0, 4.0) not in pts
+    k = pts.index((0.0, 5.0))
+    assert dirs[k + 1] == round(math.degrees(math.atan2(-3.0, 10.0)))
+
+
+def test_points_doubling_back_along_the_road_are_dropped():
+    # south to (0, 0); the next lane starts 7 m back north at (0, 7) and runs south: its points
+    # behind (0, 0) are dropped, so the road is counted once
+    south = -math.pi / 2
+    poly = [(0.0, 20.0, south), (0.0, 0.0, south), (0.0, 7.0, south), (0.0, -10.0, south)]
+    pts, _ = _dense(poly)
+    ys = [y for _, y in pts]
+    assert ys == sorted(ys, reverse=True)  # monotone: never back north
+    assert DenseRoute.from_polyline(poly).length == pytest.approx(30.0)
