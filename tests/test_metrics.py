@@ -183,3 +183,42 @@ def test_rescoring_under_rules_that_end_sooner_is_exact_and_later_is_flagged():
     # the other way: 2.0's rules would have run past 85 s, so the cut log is not their run
     short, exact = ended_by(cut, LB2_RULES)
     assert not exact and short is cut
+
+
+# ------------------------------------------------------------------ against the transcription
+def _agree(log) -> None:
+    """icrsumo's lb1 scores and termination agree with the leaderboard's code transcribed in
+    tests/lb1_reference.py within 1e-4."""
+    import lb1_reference
+
+    ref = lb1_reference.score(log)
+    res = score_episode(log)
+    assert res.rc == pytest.approx(ref["score_route"], abs=1e-4)
+    assert res.is_ == pytest.approx(ref["score_penalty"], abs=1e-4)
+    assert res.ds == pytest.approx(ref["score_composed"], abs=1e-4)
+    if ref["ended"] is not None:
+        assert res.termination == ref["ended"]
+
+
+CASES = ["clean", "contacts", "places", "outside", "wrong_turn", "parallel", "short"]
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_hand_built_logs_agree_with_the_leaderboard_transcription(case):
+    xy = straight(201)
+    logs = {
+        "clean": make_log(xy, ROUTE, termination="completed"),
+        "contacts": make_log(xy, ROUTE, termination="completed", events=tuple(
+            contact("collision_vehicle", i, "veh1") for i in [*range(20, 30), 100, 140])),
+        "places": make_log(xy, ROUTE, termination="completed", events=(
+            contact("collision_vehicle", 20, "a"), contact("collision_vehicle", 24, "b"),
+            contact("collision_static", 60, "roadside"), contact("collision_static", 70, "roadside"),
+            Event("red_light", 3.0, 0.0, "tl"))),
+        "outside": make_log(xy, ROUTE, termination="completed",
+                            outside=[2 if 20 < x <= 40 else 1 if 60 < x <= 70 else 0 for x, _ in xy]),
+        "wrong_turn": make_log(straight(100) + [(50.0, 0.5 * j) for j in range(1, 61)],
+                               ((0.0, 0.0), (200.0, 0.0)), termination="route_deviation"),
+        "parallel": make_log(straight(120, y=20.0), ROUTE, termination="route_deviation"),
+        "short": make_log(straight(191) + [(95.25, 0.0)] * 1511, ROUTE, speed=[10.0] * 191 + [0.0] * 1511),
+    }
+    _agree(logs[case])

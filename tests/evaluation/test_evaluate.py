@@ -107,6 +107,22 @@ def test_report_rescores_from_the_logs_alone_to_the_same_numbers(reference, tmp_
     assert code == 2 and "--scoring" in capsys.readouterr().err
 
 
+def test_stored_episodes_agree_with_the_leaderboard_transcription(reference):
+    """Every stored episode's DS, RC and IS, rescored from its log by the leaderboard's code
+    transcribed in tests/lb1_reference.py, agree with the stored ones within 1e-4."""
+    import lb1_reference
+
+    ref_out, _ = reference
+    with ResultStore(ref_out / "results.sqlite") as store:
+        records = store.records()
+        assert records
+        for r in records:
+            got = lb1_reference.score(store.episode_log(r.agent, r.route_id, r.family, r.k, r.seed))
+            assert abs(got["score_route"] - r.rc) <= 1e-4 and abs(got["score_penalty"] - r.is_) <= 1e-4
+            assert abs(got["score_composed"] - r.ds) <= 1e-4
+            assert got["ended"] in (str(r.termination), None)
+
+
 def test_another_scoring_is_another_configuration(reference, capsys):
     ref_out, _ = reference
     raw = (ref_out / "config.json").read_bytes()
