@@ -107,6 +107,28 @@ def test_report_rescores_from_the_logs_alone_to_the_same_numbers(reference, tmp_
     assert code == 2 and "--scoring" in capsys.readouterr().err
 
 
+def test_a_run_under_one_scoring_rescores_to_a_fresh_run_under_the_other(tmp_path):
+    """An lb2 run rescored with lb1 gives the episodes of a fresh lb1 run (its logs are cut
+    exactly where 1.0's rules end them), and rescored with lb2 its own files."""
+    two, one = tmp_path / "lb2", tmp_path / "lb1"
+    kw = dict(agents=("route-oracle", "instruction-follower"), families=("misleading",), k=1,
+              routes=("tiny_003",))
+    evaluate(_opts(two, scoring="lb2", **kw))
+    assert json.loads((two / "config.json").read_text())["scoring"] == "lb2"
+    status = json.loads((two / "leaderboard" / "route-oracle_baseline.json").read_text())
+    assert status["_checkpoint"]["records"][0]["status"] in ("Perfect", "Completed")
+    evaluate(_opts(one, **kw))
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for name in ("config.json", "results.sqlite"):
+        (copy / name).write_bytes((two / name).read_bytes())
+    (copy / "instructions").symlink_to(two / "instructions")
+    assert main(["report", str(copy), "--quiet", "--scoring", "lb2"]) == 0
+    assert (copy / "summary.json").read_bytes() == (two / "summary.json").read_bytes()
+    assert main(["report", str(copy), "--quiet", "--scoring", "lb1"]) == 0
+    assert (copy / "episodes.csv").read_bytes() == (one / "episodes.csv").read_bytes()
+
+
 def test_stored_episodes_agree_with_the_leaderboard_transcription(reference):
     """Every stored episode's DS, RC and IS, rescored from its log by the leaderboard's code
     transcribed in tests/lb1_reference.py, agree with the stored ones within 1e-4."""
