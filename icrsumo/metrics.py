@@ -61,6 +61,18 @@ MAX_ID_TIME = 5.0
 COLLISIONS = (EventKind.COLLISION_VEHICLE, EventKind.COLLISION_PEDESTRIAN, EventKind.COLLISION_STATIC)
 
 
+def _contacts(events: Sequence[Event], last_id: str | None) -> list[tuple[Event, str]]:
+    """The collision events among ``events`` with their actor ("" for the static layout, which
+    has no identity), less those with ``last_id``, the actor of the last counted collision."""
+    out = []
+    for e in events:
+        if e.kind in COLLISIONS:
+            actor = e.other if e.kind != EventKind.COLLISION_STATIC else ""
+            if not (actor and actor == last_id):
+                out.append((e, actor))
+    return out
+
+
 class CollisionCounter:
     """Leaderboard 1.0's ``CollisionTest``, step by step: :meth:`step` takes one step's time (s),
     ego centre (m) and events, and returns the collisions counted there.
@@ -79,12 +91,7 @@ class CollisionCounter:
 
     def step(self, t: float, x: float, y: float, events: Sequence[Event]) -> list[Event]:
         out: list[Event] = []
-        for e in events:
-            if e.kind not in COLLISIONS:
-                continue
-            actor = e.other if e.kind != EventKind.COLLISION_STATIC else ""
-            if actor and actor == self.last_id:
-                continue
+        for e, actor in _contacts(events, self.last_id):
             if any(math.sqrt((x - px) ** 2 + (y - py) ** 2) <= MIN_AREA_OF_COLLISION
                    for px, py in self.places):
                 continue
@@ -136,12 +143,7 @@ class CollisionCounter2:
 
     def step(self, t: float, x: float, y: float, speed: float, events: Sequence[Event]) -> list[Event]:
         out: list[Event] = []
-        for e in events:
-            if e.kind not in COLLISIONS:
-                continue
-            actor = e.other if e.kind != EventKind.COLLISION_STATIC else ""
-            if actor and actor == self.last_id:
-                continue
+        for e, actor in _contacts(events, self.last_id):
             if self._near(x, y):
                 continue
             if speed < self.MIN_SPEED:

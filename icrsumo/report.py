@@ -428,12 +428,18 @@ _LB_LABELS = ["Avg. driving score", "Avg. route completion", "Avg. infraction pe
               "Route timeouts", "Agent blocked"]
 
 
+def _lb_status(r: EpisodeRecord) -> tuple[str, str | None, str]:
+    """A record's leaderboard status, the infraction key its termination adds and that entry."""
+    if r.status == EpisodeStatus.CRASHED:
+        return ("Failed - Agent crashed" if "agent" in r.message.lower() else "Failed - Simulation crashed",
+                None, "")
+    return _LB_TERMINATION.get(r.termination, (f"Failed - {r.termination}", None, ""))
+
+
 def _lb_record(r: EpisodeRecord, index: int) -> dict:
     infr: dict[str, list[str]] = {k: [] for k in LB_INFRACTIONS}
-    if r.status == EpisodeStatus.CRASHED:
-        status = "Failed - Agent crashed" if "agent" in r.message.lower() else "Failed - Simulation crashed"
-    else:
-        status, key, msg = _LB_TERMINATION.get(r.termination, (f"Failed - {r.termination}", None, ""))
+    status, key, msg = _lb_status(r)
+    if r.status != EpisodeStatus.CRASHED:
         for kind, factor in r.infractions:
             if kind == EventKind.OUTSIDE_ROUTE_LANES:
                 infr["outside_route_lanes"].append(
@@ -535,10 +541,8 @@ _LB2_LABELS = [*_LB_LABELS, "Yield emergency vehicles infractions", "Scenario ti
 
 def _lb2_record(r: EpisodeRecord, index: int) -> dict:
     infr: dict[str, list[str]] = {k: [] for k in LB2_INFRACTIONS}
-    if r.status == EpisodeStatus.CRASHED:
-        status = "Failed - Agent crashed" if "agent" in r.message.lower() else "Failed - Simulation crashed"
-    else:
-        status, key, msg = _LB_TERMINATION.get(r.termination, (f"Failed - {r.termination}", None, ""))
+    status, key, msg = _lb_status(r)
+    if r.status != EpisodeStatus.CRASHED:
         for kind, factor in r.infractions:
             if kind == EventKind.OUTSIDE_ROUTE_LANES:
                 infr["outside_route_lanes"].append(
