@@ -38,12 +38,16 @@ def _table(name: str, title: str, summary: dict, eval_cmd: str) -> list[str]:
         return []
     lines = [
         f"## Measured evaluation ({title})", "",
-        f"`{eval_cmd}` (seed {summary['seed']}, K = {summary['k']}):", "",
+        f"`{eval_cmd}` (seed {summary['seed']}, K = {summary['k']}, scored by "
+        f"{SCORED_BY.get(summary.get('scoring'), 'icrsumo rules before Leaderboard 1.0')}):", "",
         "| Instructions | DS | RC | IS | ΔDS [95% CI] | RD |", "|---|---|---|---|---|---|",
         _row(name, "baseline", {**res["baseline"], "dDS": 0.0, "dDS_ci95": None}),
     ]
     return lines + [_row(name, fam, r) for fam, r in res["families"].items()] + [""]
 
+
+#: a summary's scoring -> the rules it names
+SCORED_BY = {"lb1": "CARLA Leaderboard 1.0's rules", "lb2": "CARLA Leaderboard 2.0's rules"}
 
 #: collect folder name -> what it holds (the command that wrote it and its routes)
 DATA = {
