@@ -32,7 +32,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
-from icrsumo.termination import EPS, LB1_RULES, LB2_RULES, RouteRules, events_by_step, replay, run_monitor
+from icrsumo.termination import EPS, LB1_RULES, LB2_RULES, RouteRules, events_by_step, run_monitor
 from icrsumo.types import TERMINATIONS, EpisodeLog, EpisodeResult, Event, Infraction
 from icrsumo.vocab import EventKind, Termination
 
@@ -188,24 +188,30 @@ def ended_by(log: EpisodeLog, rules: RouteRules) -> tuple[EpisodeLog, bool]:
     the log's steps, the log cut there (with that termination) is exactly that run's; where no
     rule of theirs fired by the log's end (it was recorded under rules that end sooner), the
     log is returned as it is and not exact."""
-    end = replay(log, rules)
+    log, exact, _ = _ended(log, rules)
+    return log, exact
+
+
+def _ended(log: EpisodeLog, rules: RouteRules):
+    """:func:`ended_by` and the finished monitor of the returned log (one replay where the
+    rules end the episode where it was recorded, the usual case)."""
+    mon, end = run_monitor(log, rules)
     if end is None:
-        ending = log.termination in (Termination.SIM_ERROR, Termination.STUCK)
-        return log, ending
+        return log, log.termination in (Termination.SIM_ERROR, Termination.STUCK), mon
     kind, t = end
     n = bisect.bisect_right(log.t, t + EPS)
     if n >= len(log.t) and kind == log.termination:
-        return log, True
+        return log, True, mon
     half = 0.5 * log.step_length + EPS
     cut = {f: getattr(log, f)[:n] for f in ("t", "x", "y", "yaw", "speed", "progress", "instruction",
                                                "outside", "route_dist", "traffic_speed", "speed_limit")}
     events = tuple(e for e in log.events if e.t <= t + half)
-    return replace(log, **cut, events=events, termination=kind, termination_t=t), True
+    log = replace(log, **cut, events=events, termination=kind, termination_t=t)
+    return log, True, run_monitor(log, rules)[0]
 
 
 def _score_lb1(log: EpisodeLog) -> EpisodeResult:
-    log, _ = ended_by(log, LB1_RULES)
-    mon, _ = run_monitor(log, LB1_RULES)
+    log, _, mon = _ended(log, LB1_RULES)
     return _scored(log, mon, list(penalised_infractions(log)))
 
 
@@ -230,8 +236,7 @@ MIN_SPEED_FACTOR = 0.7
 
 
 def _score_lb2(log: EpisodeLog) -> EpisodeResult:
-    log, _ = ended_by(log, LB2_RULES)
-    mon, _ = run_monitor(log, LB2_RULES)
+    log, _, mon = _ended(log, LB2_RULES)
     for e in log.events:
         if e.kind not in EVENT_KINDS:
             raise ValueError(f"unknown event kind {e.kind!r} at t={e.t} (known: {sorted(EVENT_KINDS)})")

@@ -176,9 +176,9 @@ def _lane_pieces(pts: list[tuple[float, float]], heads: list[float | None]) -> l
     for i in range(1, len(pts)):
         (ax, ay), (bx, by), h = pts[i - 1], pts[i], heads[i - 1]
         d = math.atan2(by - ay, bx - ax)
-        if _angle(d, h) > JOIN_RAD:
+        if angle_diff(d, h) > JOIN_RAD:
             forward = (bx - ax) * math.cos(h) + (by - ay) * math.sin(h)
-            if _angle(heads[i], h) > TURN_JOIN_RAD:  # a turn with no lane shape: a straight cut
+            if angle_diff(heads[i], h) > TURN_JOIN_RAD:  # a turn with no lane shape: a straight cut
                 a = _cut_tail(pieces[-1], TURN_CUT_M) if len(pieces[-1]) > 1 else pieces[-1][-1]
                 d = math.atan2(by - a[1], bx - a[0])
                 pieces.append([(a[0], a[1], d), (bx, by, d)])
@@ -205,7 +205,7 @@ def _cut_tail(piece: _Piece, length: float) -> tuple[float, float, float | None]
     return piece[-1]
 
 
-def _angle(a: float, b: float) -> float:
+def angle_diff(a: float, b: float) -> float:
     """|a - b| wrapped to [0, pi] (rad)."""
     return abs((a - b + math.pi) % (2.0 * math.pi) - math.pi)
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..dynamics import EgoState
 from ..networks import RoadNet
-from ..termination import OFF_LANES, OFF_LANES_LB2, WRONG_LANE, WRONG_LANE_LB2
+from ..termination import OFF_LANES, OFF_LANES_LB2, WRONG_LANE, WRONG_LANE_LB2, angle_diff
 from ..types import Event
 from ..vocab import EventKind
 from .drivable import DrivableArea
@@ -44,11 +44,6 @@ def footprint_corners(st: EgoState, size: tuple[float, float]) -> np.ndarray:
     hl, hw = 0.5 * size[0], 0.5 * size[1]
     local = np.array([[hl, hw], [hl, -hw], [-hl, -hw], [-hl, hw]])
     return np.stack([st.x + local[:, 0] * c - local[:, 1] * s, st.y + local[:, 0] * s + local[:, 1] * c], 1)
-
-
-def angle_diff(a: float, b: float) -> float:
-    """|a - b| wrapped to [0, pi] (rad)."""
-    return abs((a - b + math.pi) % (2 * math.pi) - math.pi)
 
 
 def off_corners(st: EgoState, size: tuple[float, float], count_off) -> int:
