@@ -14,7 +14,7 @@ import contextlib
 import os
 from pathlib import Path
 
-from .convert import ConvertOptions, convert_routes, safe_name
+from .convert import CONVERTER_VERSION, ConvertOptions, convert_routes, safe_name
 from .errors import InputError
 from .fsio import write_atomic
 from .instructions.generate import GenerateOptions, generate
@@ -42,7 +42,9 @@ def bundled_route(route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUITE,
     suites = bundled_suites()
     if suite not in suites:
         raise InputError("suite", suite, "not a bundled route split", f"use one of {', '.join(suites)}")
-    root = cache_root() / f"{suite}-{traffic}" / safe_name(route)
+    # the converter's version in the path: a route converted by an earlier icrsumo (other traffic)
+    # is never reused
+    root = cache_root() / f"{suite}-{traffic}-c{CONVERTER_VERSION}" / safe_name(route)
     sc_dir = root / "scenarios" / safe_name(route)
     instr = root / "instructions" / f"{safe_name(route)}.json"
     if (sc_dir / "scenario.json").is_file() and instr.is_file():

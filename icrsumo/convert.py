@@ -32,11 +32,16 @@ from .resources import bundled_towns
 from .routes import read_routes
 from .routing import MatchError, plan_route
 from .scenario import MANIFEST, SCENARIO_FORMAT, STEP_LENGTH, read_scenario
-from .traffic import TRAFFIC_LEVELS, make_traffic
+from .traffic import TRAFFIC_LEVELS, fleet_cap, make_traffic
 from .types import RouteSpec
 
 #: bump when the scenario output changes for the same input, to invalidate reuse
-CONVERTER_VERSION = 1
+CONVERTER_VERSION = 2
+#: s a background vehicle may stand stuck before SUMO teleports it: below the leaderboard's 180 s
+#: "blocked" rule, so a background jam dissolves before it can end the ego's route. The ego's
+#: vType sets timeToTeleport="-1": SUMO counts the ego's waiting time like any vehicle's and would
+#: otherwise teleport the ego too (measured: two carla-fidelity routes ended so)
+TELEPORT_S = 120.0
 #: ego vehicle footprint (m), a mid-size car as CARLA's Lincoln MKZ
 EGO_LENGTH, EGO_WIDTH = 4.9, 2.1
 
@@ -172,11 +177,13 @@ def _source_hash(spec: RouteSpec, net_sha: str, opts: ConvertOptions) -> str:
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
 
 
-def _sumocfg(net_rel: str, route_files: list[str], seed: int, end: float) -> str:
+def _sumocfg(net_rel: str, route_files: list[str], seed: int, end: float, max_vehicles: int = -1) -> str:
     # collision.mingap-factor 0: a collision is a contact (gap < 0); SUMO's default also counts a
     # same-lane gap below the follower's minGap (2.5 m), which is no contact (see README,
-    # *Fidelity on CARLA's towns*)
+    # *Fidelity on CARLA's towns*). max-num-vehicles caps the background fleet (traffic.fleet_cap;
+    # the ego is placed with moveToXY, which inserts it regardless); TELEPORT_S: see there
     files = ",".join(route_files)
+    cap = f'\n        <max-num-vehicles value="{max_vehicles}"/>' if max_vehicles >= 0 else ""
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <configuration>
     <input>
@@ -192,7 +199,7 @@ def _sumocfg(net_rel: str, route_files: list[str], seed: int, end: float) -> str
         <collision.action value="warn"/>
         <collision.check-junctions value="true"/>
         <collision.mingap-factor value="0"/>
-        <time-to-teleport value="300"/>
+        <time-to-teleport value="{TELEPORT_S:.0f}"/>{cap}
     </processing>
     <random_number>
         <seed value="{seed}"/>
@@ -209,7 +216,8 @@ def _sumocfg(net_rel: str, route_files: list[str], seed: int, end: float) -> str
 def _ego_routes(edges: tuple[str, ...]) -> str:
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <routes>
-    <vType id="ego" vClass="passenger" length="{EGO_LENGTH}" width="{EGO_WIDTH}" color="1,0,0"/>
+    <vType id="ego" vClass="passenger" length="{EGO_LENGTH}" width="{EGO_WIDTH}" color="1,0,0"
+           timeToTeleport="-1"/>
     <route id="ego_route" edges="{' '.join(edges)}"/>
 </routes>
 """
@@ -252,11 +260,12 @@ def _convert_one(
                 net.path, net.lane_km, net.edge_km, net.has_sidewalks, staging, seed,
                 opts.traffic, end,
             )
+            cap = fleet_cap(spec.town or town, net.lane_km, opts.traffic) if traffic.vehicles else -1
             net_rel = os.path.relpath(net.path, final)
             route_files = ["ego.rou.xml"] + [f for f in (traffic.vehicles, traffic.pedestrians) if f]
             (staging / "ego.rou.xml").write_text(_ego_routes(route.edges), encoding="utf-8")
             (staging / "scenario.sumocfg").write_text(
-                _sumocfg(net_rel, route_files, seed, end), encoding="utf-8")
+                _sumocfg(net_rel, route_files, seed, end, cap), encoding="utf-8")
             manifest = {
                 "format": SCENARIO_FORMAT,
                 "route_id": spec.id,
@@ -285,7 +294,8 @@ def _convert_one(
                 "traffic": {"level": opts.traffic, "vehicles": traffic.vehicles,
                             "pedestrians": traffic.pedestrians,
                             "n_vehicles": traffic.n_vehicles,
-                            "n_pedestrians": traffic.n_pedestrians, "begin": 0.0, "end": end},
+                            "n_pedestrians": traffic.n_pedestrians, "begin": 0.0, "end": end,
+                            "max_vehicles": cap},
                 "source_hash": source_hash,
             }
             (staging / MANIFEST).write_text(dumps_json(manifest), encoding="utf-8")

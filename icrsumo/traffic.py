@@ -23,6 +23,29 @@ TRAFFIC_LEVELS: dict[str, tuple[float, float]] = {
     "dense": (300.0, 240.0),
 }
 
+#: background vehicles CARLA Leaderboard 1.0 keeps on each town at once
+#: (``leaderboard/scenarios/route_scenario.py``, ``_initialize_actors``: ``town_amount``; Town10HD's
+#: number from LMDrive's copy of that file, whose key names the map as CARLA loads it)
+LEADERBOARD_FLEET: dict[str, int] = {
+    "Town01": 120, "Town02": 100, "Town03": 120, "Town04": 200, "Town05": 120, "Town06": 150,
+    "Town07": 110, "Town10HD": 120,
+}
+#: vehicles at once per km of passenger lane on icrsumo's own towns at ``normal``: above what
+#: their demand keeps there when nothing jams (2.5-6.5 per km measured by
+#: ``tools/traffic_jams.py``), so the cap only ever stops a jam from growing
+FLEET_PER_LANE_KM = 10.0
+#: the fleet cap of a level, as a multiple of the ``normal`` one
+FLEET_FACTOR: dict[str, float] = {"none": 0.0, "light": 0.5, "normal": 1.0, "dense": 2.0}
+
+
+def fleet_cap(town: str, lane_km: float, level: str) -> int:
+    """The most background vehicles in the network at once (SUMO's ``max-num-vehicles``): the
+    leaderboard's fleet on CARLA's towns, :data:`FLEET_PER_LANE_KM` per km of lane elsewhere,
+    times the level's :data:`FLEET_FACTOR`. Insertions wait while the cap is reached, so the
+    demand of :data:`TRAFFIC_LEVELS` can never pile up into a gridlock (FINDINGS-2, class F)."""
+    base = LEADERBOARD_FLEET.get(town, FLEET_PER_LANE_KM * lane_km)
+    return int(round(base * FLEET_FACTOR[level]))
+
 
 @dataclass(frozen=True)
 class TrafficFiles:

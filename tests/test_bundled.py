@@ -83,7 +83,8 @@ def test_towns_cover_langauto_features():
 
 @pytest.mark.parametrize(("tool", "folder"), [("make_networks.py", "networks"), ("make_routes.py", "routes"),
                                               ("make_carla_routes.py", "routes/carla-train"),
-                                              ("make_carla_focus.py", "routes/carla-focus")])
+                                              ("make_carla_focus.py", "routes/carla-focus"),
+                                              ("make_carla_fidelity.py", "routes/carla-fidelity")])
 def test_tools_regenerate_byte_identical(tmp_path, tool, folder):
     subprocess.run([sys.executable, str(ROOT / "tools" / tool), "--out", str(tmp_path)],
                    check=True, capture_output=True, timeout=600)

@@ -73,7 +73,8 @@ def test_the_python_api_example_runs(tmp_path, converted, capsys):
                  "figures/rollout_tiny_003.png", "leaderboard/route-oracle_misleading.json"):
         assert (out / name).is_file(), name
     assert json.loads((out / "config.json").read_text()) == {"suite": "tiny", "seed": 2026, "k": 1,
-                                                             "traffic": "normal", "scoring": "lb1"}
+                                                             "traffic": "normal", "scoring": "lb1",
+                                                             "converter": 2}
 
     # a rerun finds everything stored: nothing runs, the same summary; not quiet, the table prints
     summary = (out / "summary.json").read_bytes()

@@ -221,12 +221,14 @@ def make_split(
     prefix: str, forbidden: set[tuple[str, ...]], *, coords: str = "sumo",
     avoid: tuple[tuple[str, ...], ...] = (), strict: bool = True,
     accept: Callable[[RoadNet, EgoRoute], bool] | None = None, attempts: int = 4000,
+    walk: Callable[[RoadNet, np.random.Generator, Split], tuple | None] | None = None,
 ) -> tuple[list[RouteSpec], list[EgoRoute]]:
     """Draw ``per_town[town]`` routes of ``split`` in each town (in town order), waypoints in
     frame ``coords``. Draws whose edge sequence is in ``forbidden`` or holds one of ``avoid`` as
     a contiguous run, or that ``accept`` (if given) turns down, are rejected. A town that yields
     fewer routes in ``attempts`` draws stops the tool (``strict``) or keeps what it drew (a note
-    is printed)."""
+    is printed). ``walk`` draws the edge sequences (default: random walks that never revisit
+    an edge)."""
     specs: list[RouteSpec] = []
     routes: list[EgoRoute] = []
     for town, net in towns.items():
@@ -234,10 +236,10 @@ def make_split(
         for _attempt in range(attempts):
             if made == per_town.get(town, 0):
                 break
-            walk = _random_walk(net, rng, split)
-            if walk is None:
+            drawn = (walk or _random_walk)(net, rng, split)
+            if drawn is None:
                 continue
-            lane, pos, edges, end_pos = walk
+            lane, pos, edges, end_pos = drawn
             pinned = _pin_waypoints(net, f"{edges[0]}_{lane}", pos, edges, end_pos)
             if pinned is None:
                 continue
@@ -259,7 +261,7 @@ def make_split(
         if made < per_town.get(town, 0):
             if strict:
                 raise SystemExit(f"{town}: could not draw {per_town[town]} {split.name} routes")
-            print(f"note: {town}: {made} of {per_town[town]} {split.name} routes")
+            print(f"note: {town}: {made} of {per_town[town]} {split.name} routes", flush=True)
     return specs, routes
 
 

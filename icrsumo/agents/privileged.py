@@ -48,6 +48,8 @@ YIELD_TIME = 4.0         # s from a conflict point within which a vehicle with t
 UNSEEN_SPEED = 15.0      # m/s assumed for a vehicle not seen at the previous call
 MINOR_ENTRY_SPEED = 6.0  # m/s at most when entering a junction on a minor link (g, m)
 YIELD_MARGIN = 2.0       # s the ego keeps between clearing a conflict point and a rival reaching it
+CHANGE_GAP_TIME = 3.0    # s a vehicle coming up behind on the target lane must be away at its closing speed
+CHANGE_LOOK_BEHIND = 80.0  # m behind the ego's rear within which such vehicles are checked
 
 
 @dataclass
@@ -129,6 +131,10 @@ class PathDriver(ABC):
     def choose(self, w: World, edge: str, options: list[str], tentative: bool) -> str | None:
         """The next edge after ``edge`` among ``options`` (None: stop at the edge's end)."""
 
+    def entered(self, w: World, edge: str) -> None:  # noqa: B027 (optional hook)
+        """The ego has just been found on normal edge ``edge`` (subclasses that track where
+        they are on a route)."""
+
     def preferred_lane(self, w: World, edge: str, lanes: tuple[int, ...], current: int) -> int:
         """Lane index to drive on ``edge`` when the next edge allows several."""
         return current if current in lanes else min(lanes, key=lambda i: (abs(i - current), i))
@@ -209,6 +215,7 @@ class PathDriver(ABC):
                 self._decided = {k: v for k, v in self._decided.items() if k != self._edge}
                 self._edge = edge
                 self._change = None
+                self.entered(w, edge)
         first = True
         hold = math.inf
         while total < HORIZON and edge in net.passenger_lanes:
@@ -316,8 +323,11 @@ class PathDriver(ABC):
         return _Path(points, c, np.array(speeds) if speeds else np.zeros(1), stops, junctions=junctions)
 
     def _lane_free(self, w: World, edge: str, lane_index: int, pos: float) -> bool:
-        """No vehicle on the target lane near the ego: from 12 m behind to 10 m ahead of its
-        front when moving, only the footprint plus 3 m either way when (nearly) stopped."""
+        """No vehicle on the target lane near the ego (from 12 m behind to 10 m ahead of its
+        front when moving, only the footprint plus 3 m either way when (nearly) stopped), and
+        none coming up from behind that would reach the ego's rear within
+        :data:`CHANGE_GAP_TIME` s at its closing speed: a gap is judged by time, not distance
+        alone, or a car 10 m back at 12 m/s runs into a change begun from a standstill."""
         if len(w.vehicles) == 0:
             return True
         lane = f"{edge}_{lane_index}"
@@ -326,8 +336,15 @@ class PathDriver(ABC):
         lon = d[:, 0] * math.cos(h) + d[:, 1] * math.sin(h)
         lat = -d[:, 0] * math.sin(h) + d[:, 1] * math.cos(h)
         half = 0.5 * w.vehicles[:, 3]
+        on_lane = np.abs(lat) < 1.8
         behind, ahead = (12.0, 10.0) if w.ego.speed > 1.0 else (self.params.length + 3.0, 3.0)
-        return not bool(np.any((np.abs(lat) < 1.8) & (lon + half > -behind) & (lon - half < ahead)))
+        if np.any(on_lane & (lon + half > -behind) & (lon - half < ahead)):
+            return False
+        speeds = self._speeds if len(self._speeds) == len(w.vehicles) else np.full(len(w.vehicles), np.nan)
+        closing = np.where(np.isfinite(speeds), speeds, UNSEEN_SPEED) - w.ego.speed
+        gap = -(lon + half) - self.params.length   # its front to the ego's rear, m
+        coming = on_lane & (gap > 0.0) & (gap < CHANGE_LOOK_BEHIND) & (gap < CHANGE_GAP_TIME * closing)
+        return not bool(coming.any())
 
     # ----------------------------------------------------------------- speed
     def _on_path(self, path: _Path, xy: np.ndarray, half: np.ndarray | float) -> np.ndarray:
@@ -490,13 +507,34 @@ class RouteOracle(PathDriver):
     #: the only agent handed the route (World.route); every other one gets None
     needs_route = True
 
-    def choose(self, w: World, edge: str, options: list[str], tentative: bool) -> str | None:
+    def __init__(self) -> None:
+        super().__init__()
+        # index into the route's edges of the edge the ego was last found on: a route may drive
+        # one road twice (around a block and back), and each visit leaves it its own way
+        self._at = 0
+
+    def reset(self, info: EpisodeInfo) -> None:
+        super().reset(info)
+        self._at = 0
+
+    def entered(self, w: World, edge: str) -> None:
+        i = self._occurrence(w, edge)
+        if i is not None:
+            self._at = i
+
+    def _occurrence(self, w: World, edge: str) -> int | None:
+        """Index of ``edge`` on the route: its first occurrence at or after the ego's (the
+        first anywhere when the ego has left the route; None if the route never drives it)."""
         edges = w.route.edges if w.route is not None else ()
-        # the edge's first occurrence on the route (the bundled routes never revisit an edge)
-        for i, e in enumerate(edges[:-1]):
-            if e == edge:
-                return edges[i + 1]
+        for i in (*range(self._at, len(edges)), *range(min(self._at, len(edges)))):
+            if edges[i] == edge:
+                return i
         return None
+
+    def choose(self, w: World, edge: str, options: list[str], tentative: bool) -> str | None:
+        i = self._occurrence(w, edge)
+        edges = w.route.edges if w.route is not None else ()
+        return edges[i + 1] if i is not None and i + 1 < len(edges) else None
 
 
 class InstructionFollower(PathDriver):

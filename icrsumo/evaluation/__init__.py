@@ -3,8 +3,8 @@
 For every agent and route: the baseline sequence and K variants of each selected family, all
 on the same scenario, seed and traffic. The out folder holds everything (reused on rerun):
 
-    OUT/config.json         suite, seed, k, traffic (and the --baseline-bank file's SHA-256):
-                            a rerun with another one is refused
+    OUT/config.json         suite, seed, k, traffic, scoring, the converter's version (and the
+                            --baseline-bank file's SHA-256): a rerun with another one is refused
     OUT/scenarios/          convert-routes output
     OUT/instructions/       generate output
     OUT/results.sqlite      one row per finished episode (committed at once): resumable

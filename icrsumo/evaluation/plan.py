@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..agents.base import Agent
-from ..convert import ConvertOptions, convert_routes, safe_name
+from ..convert import CONVERTER_VERSION, ConvertOptions, convert_routes, safe_name
 from ..errors import InputError
 from ..fsio import OutFolder, dumps_json, read_json, write_atomic
 from ..instructions.baseline_bank import BaselineBank, load_baseline_bank
@@ -64,7 +64,7 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None)
     it (its name is recorded too, but another path to the same bytes is the same
     configuration)."""
     config = {"suite": opts.suite, "seed": opts.seed, "k": opts.k, "traffic": opts.traffic,
-              "scoring": opts.scoring}
+              "scoring": opts.scoring, "converter": CONVERTER_VERSION}
     if opts.baseline_bank is not None and bank is None:
         bank = load_baseline_bank(opts.baseline_bank)
     compared = {**config, "baseline_bank_sha256": bank.sha256 if bank is not None else None}
@@ -77,7 +77,11 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None)
         if diff:
             shown = ", ".join(f"{k}={old.get(k)!r} (now {compared[k]!r})" for k in diff)
             fix = "use another --out folder, or the same options"
-            if "scoring" in diff and old.get("scoring") is None:
+            if "converter" in diff:
+                fix = ("its scenarios were converted by an earlier icrsumo (before the background fleet "
+                       "was capped, README *Background traffic*), so new episodes would not be comparable: "
+                       "run again into another --out folder")
+            elif "scoring" in diff and old.get("scoring") is None:
                 fix = ("its episodes were scored before icrsumo scored by the leaderboard's own rules: "
                        "run them again into another --out folder")
             elif diff == ["scoring"]:

@@ -163,6 +163,25 @@ def test_another_scoring_is_another_configuration(reference, capsys):
         (ref_out / "config.json").write_bytes(raw)
 
 
+def test_a_folder_converted_by_an_earlier_icrsumo_is_not_resumed(reference, capsys):
+    """Scenarios of an earlier converter (before the background fleet was capped) hold other
+    traffic: new episodes would not pair with the stored ones."""
+    ref_out, _ = reference
+    raw = (ref_out / "config.json").read_bytes()
+    cfg = json.loads(raw)
+    assert cfg["converter"] == 2
+    (ref_out / "config.json").write_text(json.dumps({k: v for k, v in cfg.items() if k != "converter"}))
+    try:
+        code = main(["evaluate", "--out", str(ref_out), "--routes", ",".join(ROUTES), "--k", "2",
+                     "--agent", "route-oracle", "--agent", "instruction-follower", "--family", "misleading",
+                     "--family", "noise", "--quiet"])
+        err = capsys.readouterr().err
+        assert code == 2 and "converted by an earlier icrsumo" in err and "another --out" in err
+        assert main(["report", str(ref_out), "--quiet"]) == 0  # stored results still report
+    finally:
+        (ref_out / "config.json").write_bytes(raw)
+
+
 def test_ray_backend_gives_identical_results(reference, tmp_path):
     pytest.importorskip("ray")
     ref_out, _ = reference
