@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import multiprocessing
 import os
 import re
 import shutil
@@ -350,7 +351,10 @@ def convert_routes(routes_file: Path, out_dir: Path, opts: ConvertOptions,
         else:
             ok_jobs.append(job)
     results: dict[str, tuple[str, str, str]] = {}
-    with ProcessPoolExecutor(max_workers=min(opts.workers, max(1, len(ok_jobs)))) as pool:
+    # spawned, not forked: the caller may hold libsumo, torch or Ray threads, which a fork copies
+    # in whatever state they are (a forked conversion worker died that way in a full test run)
+    with ProcessPoolExecutor(max_workers=min(opts.workers, max(1, len(ok_jobs))),
+                             mp_context=multiprocessing.get_context("spawn")) as pool:
         futures = {job[0].id: pool.submit(_convert_one, *job) for job in ok_jobs}
         for rid, fut in futures.items():
             results[rid] = fut.result()

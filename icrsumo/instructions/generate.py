@@ -12,6 +12,7 @@ its SHA-256 recorded in every route file and in ``index.json``.
 
 from __future__ import annotations
 
+import multiprocessing
 import zlib
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
@@ -163,7 +164,9 @@ def generate(scenarios: Path, out: Path, opts: GenerateOptions,
     opts = replace(opts, baseline_bank=user)
     jobs = [(str(d), opts) for d in dirs]
     if opts.workers > 1 and len(jobs) > 1:
-        with ProcessPoolExecutor(max_workers=min(opts.workers, len(jobs))) as pool:
+        # spawned, not forked (see icrsumo.convert.convert_routes)
+        with ProcessPoolExecutor(max_workers=min(opts.workers, len(jobs)),
+                                 mp_context=multiprocessing.get_context("spawn")) as pool:
             results = list(pool.map(_job, jobs))
     else:
         results = [_job(j) for j in jobs]
