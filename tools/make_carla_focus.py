@@ -28,12 +28,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from make_carla_routes import TOWNS, carla_towns, out_folder, write_suite  # noqa: E402
-from make_routes import Split, make_split, replan, summarise  # noqa: E402
+from make_carla_routes import TOWNS, carla_towns, out_folder, suite_edges, write_suite  # noqa: E402
+from make_routes import Split, make_split, summarise  # noqa: E402
 
 from icrsumo.networks import RoadNet  # noqa: E402
-from icrsumo.resources import bundled_suites  # noqa: E402
-from icrsumo.routes import read_routes  # noqa: E402
 from icrsumo.types import EgoRoute, RouteSpec  # noqa: E402
 
 SEED = 9099
@@ -84,9 +82,7 @@ def main() -> None:
     out = out_folder(__doc__, SUITE)
     towns, avoid = carla_towns()
     used: set[tuple[str, ...]] = set(avoid)
-    train, errors = read_routes(bundled_suites()["carla-train"])
-    assert not errors, errors
-    used.update(replan(towns[s.town], s.waypoints, "carla") for s in train)
+    used.update(suite_edges(towns, ("carla-train",)))
     rng = np.random.default_rng(SEED)
     specs: list[RouteSpec] = []
     routes: list[EgoRoute] = []

@@ -70,10 +70,10 @@ evaluation route. Use these routes for `icrsumo collect`, never for evaluation.
 """
 
 
-def langauto_edges(towns: dict[str, RoadNet]) -> tuple[tuple[str, ...], ...]:
-    """The edge sequences of LangAuto's 64 routes, as ``convert-routes`` plans them."""
+def suite_edges(towns: dict[str, RoadNet], suites: tuple[str, ...]) -> tuple[tuple[str, ...], ...]:
+    """The edge sequences of the bundled ``suites``' routes, as ``convert-routes`` plans them."""
     out = []
-    for suite in LANGAUTO:
+    for suite in suites:
         specs, errors = read_routes(bundled_suites()[suite])
         assert not errors, errors
         for s in specs:
@@ -82,6 +82,11 @@ def langauto_edges(towns: dict[str, RoadNet]) -> tuple[tuple[str, ...], ...]:
                 raise SystemExit(f"{suite}: route {s.id} does not match {s.town}")
             out.append(edges)
     return tuple(out)
+
+
+def langauto_edges(towns: dict[str, RoadNet]) -> tuple[tuple[str, ...], ...]:
+    """The edge sequences of LangAuto's 64 routes, as ``convert-routes`` plans them."""
+    return suite_edges(towns, LANGAUTO)
 
 
 def per_town_table(specs: list[RouteSpec], routes: list[EgoRoute]) -> str:

@@ -526,9 +526,11 @@ class RouteOracle(PathDriver):
         """Index of ``edge`` on the route: its first occurrence at or after the ego's (the
         first anywhere when the ego has left the route; None if the route never drives it)."""
         edges = w.route.edges if w.route is not None else ()
-        for i in (*range(self._at, len(edges)), *range(min(self._at, len(edges)))):
-            if edges[i] == edge:
-                return i
+        for start in (self._at, 0):
+            try:
+                return edges.index(edge, start)
+            except ValueError:
+                pass
         return None
 
     def choose(self, w: World, edge: str, options: list[str], tentative: bool) -> str | None:
