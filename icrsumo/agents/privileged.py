@@ -27,7 +27,7 @@ from ..instructions.intent import classify_intent
 from ..networks import Connection, RoadNet, load_net
 from ..types import Intent
 from .base import Action, EpisodeInfo, Observation, World
-from .conflicts import Conflict, ConflictMap, project
+from .conflicts import Conflict, ConflictMap, junction_of, project
 
 COMFORT_DECEL = 3.0      # m/s^2 used to plan stops
 LAT_ACCEL = 2.0          # m/s^2 allowed in curves
@@ -50,6 +50,37 @@ MINOR_ENTRY_SPEED = 6.0  # m/s at most when entering a junction on a minor link 
 YIELD_MARGIN = 2.0       # s the ego keeps between clearing a conflict point and a rival reaching it
 CHANGE_GAP_TIME = 3.0    # s a vehicle coming up behind on the target lane must be away at its closing speed
 CHANGE_LOOK_BEHIND = 80.0  # m behind the ego's rear within which such vehicles are checked
+PED_MOVING = 0.3         # m/s above which a pedestrian counts as walking
+SWEPT_MARGIN = 0.5       # m beyond the ego's half width within which a standing pedestrian is in its way
+FOE_ACCEL = 2.6          # m/s^2 a foe is assumed to accelerate with (SUMO's default passenger car)
+FOE_TOP_SPEED = 13.89    # m/s a foe accelerates to at most when its arrival is estimated
+QUEUE_HEAD_M = 10.0      # m before the junction within which a standing car's front heads its queue
+STANDING_WAIT = 6.0      # s the ego waits, standing, for standing queue heads before ignoring them
+LINE_HOLD = 2.0          # m past the junction entry within which a slow ego still holds at the line
+LINE_HOLD_SPEED = 3.0    # m/s below which an ego just past the entry holds rather than creeping on
+
+
+def arrival_time(dist: np.ndarray, speed: np.ndarray, accel: float = FOE_ACCEL,
+                 top: float = FOE_TOP_SPEED) -> np.ndarray:
+    """Seconds a vehicle at ``speed`` (m/s) needs to cover ``dist`` (m), both (N,),
+    accelerating at ``accel`` (m/s^2) up to ``top`` m/s (or keeping a higher speed)."""
+    v = np.maximum(speed, 0.0)
+    cruise = np.maximum(v, top)
+    t_top = np.maximum(cruise - v, 0.0) / accel               # s to reach top speed
+    d_top = (cruise ** 2 - v ** 2) / (2 * accel)                # m covered meanwhile
+    t_acc = (np.sqrt(v ** 2 + 2 * accel * np.maximum(dist, 0.0)) - v) / accel
+    return np.where(dist <= d_top, t_acc, t_top + (dist - d_top) / cruise)
+
+
+def _speeds_since(seen: tuple[float, np.ndarray] | None, t: float, xy: np.ndarray) -> np.ndarray:
+    """Speed (m/s) of each point of ``xy`` ((N, 2) m at time ``t`` s) from the nearest point of
+    ``seen`` = (time s, (M, 2) m) within 3 m; NaN where none is (or nothing was seen)."""
+    speeds = np.full(len(xy), np.nan)
+    if seen is not None and len(xy) and len(seen[1]) and t > seen[0]:
+        d = xy[:, None, :] - seen[1][None, :, :]
+        near = np.hypot(d[..., 0], d[..., 1]).min(axis=1)
+        speeds = np.where(near < 3.0, near / (t - seen[0]), np.nan)
+    return speeds
 
 
 @dataclass
@@ -99,6 +130,11 @@ class PathDriver(ABC):
         # other vehicles' speeds (m/s), estimated from their positions at the previous call
         self._seen: tuple[float, np.ndarray] | None = None
         self._speeds = np.zeros(0)
+        self._ped_seen: tuple[float, np.ndarray] | None = None
+        self._ped_speeds = np.zeros(0)
+        # junction id -> when the ego, standing, began to wait for a standing queue head (s)
+        self._queue_wait: dict[str, float] = {}
+        self._now = 0.0
 
     # ----------------------------------------------------------------- protocol
     def reset(self, info: EpisodeInfo) -> None:
@@ -110,12 +146,19 @@ class PathDriver(ABC):
         self._change = None
         self._seen = None
         self._speeds = np.zeros(0)
+        self._ped_seen = None
+        self._ped_speeds = np.zeros(0)
+        self._queue_wait.clear()
+        self._now = 0.0
 
     def act(self, obs: Observation) -> Action:
         w = obs.world
         assert w is not None, "privileged agent without a World view"
         self.observe(obs)
-        self._track(obs.t, w.vehicles)
+        self._track(obs.t, w.vehicles, w.pedestrians)
+        self._now = obs.t
+        if w.ego.speed > LINE_HOLD_SPEED:   # driving on: the waits at junctions are over
+            self._queue_wait.clear()
         lane, pos = self._locate(w)
         if not lane:
             return Action(waypoints=np.array([[2.0, 0.0], [4.0, 0.0]]), target_speed=0.0)
@@ -139,21 +182,16 @@ class PathDriver(ABC):
         """Lane index to drive on ``edge`` when the next edge allows several."""
         return current if current in lanes else min(lanes, key=lambda i: (abs(i - current), i))
 
-    def _track(self, t: float, vehicles: np.ndarray) -> None:
-        """Estimate each vehicle's speed (m/s) from the nearest position seen at the previous
-        call (vehicles carry no ids here; between calls 0.1 s apart they move far less than
-        they stand apart); NaN for a vehicle with no neighbour within 3 m then."""
+    def _track(self, t: float, vehicles: np.ndarray, pedestrians: np.ndarray | None = None) -> None:
+        """Estimate each vehicle's and pedestrian's speed (m/s) from the nearest position seen
+        at the previous call (they carry no ids here; between calls 0.1 s apart they move far
+        less than they stand apart); NaN for one with no neighbour within 3 m then."""
         xy = vehicles[:, :2] if len(vehicles) else np.zeros((0, 2))
-        speeds = np.full(len(xy), np.nan)
-        if self._seen is not None and len(xy) and len(self._seen[1]):
-            dt = t - self._seen[0]
-            if dt > 0:
-                prev = self._seen[1]
-                d = xy[:, None, :] - prev[None, :, :]
-                near = np.hypot(d[..., 0], d[..., 1]).min(axis=1)
-                speeds = np.where(near < 3.0, near / dt, np.nan)
+        self._speeds = _speeds_since(self._seen, t, xy)
         self._seen = (t, xy.copy())
-        self._speeds = speeds
+        people = pedestrians if pedestrians is not None and len(pedestrians) else np.zeros((0, 2))
+        self._ped_speeds = _speeds_since(self._ped_seen, t, people)
+        self._ped_seen = (t, people.copy())
 
     # ----------------------------------------------------------------- planning
     def _locate(self, w: World) -> tuple[str, float]:
@@ -377,7 +415,12 @@ class PathDriver(ABC):
             if len(gaps):
                 stop_s = min(stop_s, float(gaps.min()) - MIN_GAP)
         if len(w.pedestrians):
-            s = self._on_path(path, w.pedestrians, 0.5)
+            # a walking pedestrian near the path may step onto it; a standing one stops the
+            # ego only inside its swept path (SUMO's pedestrians wait at a kerb for a close car)
+            still = self._ped_speeds < PED_MOVING if len(self._ped_speeds) == len(w.pedestrians) \
+                else np.zeros(len(w.pedestrians), dtype=bool)
+            reach = np.where(still, 0.5 * self.params.width + SWEPT_MARGIN - CORRIDOR, 0.5)
+            s = self._on_path(path, w.pedestrians, reach)
             s = s[np.isfinite(s) & (s > 0.0)]
             if len(s):
                 stop_s = min(stop_s, float(s.min()) - MIN_GAP)
@@ -439,18 +482,28 @@ class PathDriver(ABC):
         Rivals: moving vehicles whose front is inside the junction and that have not passed a
         conflict point and, where the ego gives way (:meth:`_yields_to`), moving ones
         approaching it within :data:`YIELD_APPROACH` m or :data:`YIELD_TIME` s (on a link of the
-        same rank: those that get there first). One standing still is no rival: it
-        waits, often for the ego (SUMO's cars see it once it is close), and one standing on the
-        ego's path stops the ego as an obstacle. Before the junction the ego waits at its entry
-        while a rival would reach a conflict point before the ego has passed it; at a merge it
-        follows a rival that is no farther from the merge point than the ego; inside, it stops
-        before the conflict point while it still can."""
+        same rank: those that get there first). A foe's arrival is estimated with
+        acceleration from its speed (:data:`FOE_ACCEL`), not its speed alone: a car pulling
+        away at 0.6 m/s 18 m out arrives in about 4 s, not 30. A standing car is no rival (it
+        waits, often for the ego, and one on the ego's path stops the ego as an obstacle),
+        except at the head of a queue on a link that ranks higher: at the start of a green it
+        is about to go. The ego waits for such a car for at most :data:`STANDING_WAIT` s of
+        standing still (it may be waiting for something else). Before the junction the ego
+        waits at its entry while a rival would reach a conflict point before the ego has
+        passed it, and a slow ego just past the entry holds there rather than creeping towards
+        the conflict point into the foe's lane; at a merge it follows a rival that is no
+        farther from the merge point than the ego; farther inside, it stops before the
+        conflict point while it still can."""
         if len(w.vehicles) == 0:
             return math.inf
         xy, yaw, half = w.vehicles[:, :2], w.vehicles[:, 2], 0.5 * w.vehicles[:, 3]
-        v_f = np.where(np.isfinite(self._speeds), self._speeds, UNSEEN_SPEED)
+        v_f = np.where(np.isfinite(self._speeds), self._speeds, UNSEEN_SPEED) \
+            if len(self._speeds) == len(w.vehicles) else np.full(len(w.vehicles), UNSEEN_SPEED)
         moving = v_f > MOVING
-        outside = s_entry > 0.5
+        junction = junction_of(conn.via)
+        since = self._queue_wait.get(junction)
+        heads_count = since is None or self._now - since < STANDING_WAIT
+        at_line = s_entry > 0.5 or (s_entry > -LINE_HOLD and w.ego.speed < LINE_HOLD_SPEED)
         stop = math.inf
         for cf in self._conflicts(conn):
             s_c = s_entry + cf.s_ours
@@ -459,15 +512,23 @@ class PathDriver(ABC):
             s_v = project(cf.path, cf.cum, xy, yaw)
             d_f = cf.s_foe - s_v                       # centre's distance to the conflict point
             near = d_f < np.maximum(YIELD_APPROACH, v_f * YIELD_TIME)
-            ahead_of_entry = s_v + half >= cf.entry    # its front is inside the junction
+            front = s_v + half                          # its front's arc position on the foe path
+            ahead_of_entry = front >= cf.entry         # its front is inside the junction
             t_ego = (s_c + self.params.length + 2.0) / max(w.ego.speed, 2.0) + YIELD_MARGIN   # s until clear
-            sooner = d_f / np.maximum(v_f, 0.1) < t_ego
+            sooner = arrival_time(np.maximum(d_f, 0.0), v_f) < t_ego
             way = self._yields_to(w, conn, cf.foe)
-            rival = np.isfinite(d_f) & (d_f > -(half + 1.0)) & moving & \
-                (ahead_of_entry | (near & (way > 0)) | (near & sooner & (way == 0)))
+            heads = np.zeros(len(xy), dtype=bool)
+            if heads_count and way > 0 and self._rank(w, cf.foe) == 2:
+                queued = np.isfinite(d_f) & ~moving & ~ahead_of_entry & (front > cf.entry - QUEUE_HEAD_M)
+                if queued.any():
+                    heads[np.flatnonzero(queued)[np.argmin(d_f[queued])]] = True
+                    if w.ego.speed < MOVING:
+                        self._queue_wait.setdefault(junction, self._now)
+            rival = np.isfinite(d_f) & (d_f > -(half + 1.0)) & \
+                ((moving & (ahead_of_entry | (near & (way > 0)) | (near & sooner & (way == 0)))) | heads)
             if not rival.any():
                 continue
-            sooner &= rival
+            sooner = (sooner & rival) | heads
             if cf.merge:
                 ahead = rival & (d_f < s_c + MERGE_MARGIN)
                 if ahead.any():
@@ -475,7 +536,7 @@ class PathDriver(ABC):
                 sooner &= ~ahead
             if not sooner.any():
                 continue
-            if outside:
+            if at_line:
                 stop = min(stop, s_entry - STOP_MARGIN)
             elif s_c - CONFLICT_CLEAR > 1.0:
                 stop = min(stop, s_c - CONFLICT_CLEAR)

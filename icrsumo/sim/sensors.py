@@ -36,6 +36,23 @@ from .lanes import ALLOWED_OUT_DISTANCE_LB2, DrivingLanes, WrongLaneState, wrong
 STOP_SPEED, STOP_ZONE = 0.1, 15.0
 #: wrong way: heading off the lane direction by more than this (rad)
 WRONG_WAY_RAD = math.radians(100.0)
+#: m past a junction entry after which SUMO's internal lane names the ego's movement (at the
+#: entry, movements from one lane share their first metres and SUMO may report any of them)
+MOVEMENT_KNOWN_M = 15.0
+
+
+@dataclass(frozen=True)
+class PendingLight:
+    """A junction entered from ``approach`` lane at (``x``, ``y``) m while the lights of the
+    movements from that lane disagreed: ``red`` / ``not_red``, the edges those movements lead
+    to. The red light is charged once the ego's own movement is known (:meth:`Sensors.detect`)."""
+
+    approach: str
+    x: float
+    y: float
+    tls: str
+    red: frozenset[str]
+    not_red: frozenset[str]
 
 
 def footprint_corners(st: EgoState, size: tuple[float, float]) -> np.ndarray:
@@ -95,7 +112,8 @@ class SensorState:
     ``prev_lane``: the last lane SUMO placed the ego on; ``stopped``: lanes whose stop zone the
     ego stood in since it entered them; ``roadside`` / ``wrong``: footprint off the drivable
     area / heading against SUMO's lane at this step; ``lights``: the states at this step of the
-    lights controlling the connections from ``prev_lane`` (the next step's red-light check)."""
+    lights controlling the connections from ``prev_lane`` (the next step's red-light check);
+    ``pending``: a junction entry whose red light waits for the movement to be known."""
 
     outside: int = 0
     lane_state: WrongLaneState = WrongLaneState()
@@ -106,6 +124,7 @@ class SensorState:
     roadside: bool = False
     wrong: bool = False
     lights: Mapping[str, str] = field(default_factory=lambda: NO_LIGHTS)
+    pending: PendingLight | None = None
 
 
 class Sensors:
@@ -159,19 +178,34 @@ class Sensors:
                 net.lane_length.get(lane, 0.0) - lane_pos <= STOP_ZONE and lane not in stopped:
             stopped = stopped | {lane}
         prev = state.prev_lane
+        pending = state.pending
         if prev and not prev.startswith(":") and lane.startswith(":"):
+            pending = None
             edge = prev.rsplit("_", 1)[0]
             idx = int(prev.rsplit("_", 1)[1])
-            for nxt in net.successors.get(edge, ()):
-                for c in net.connections[(edge, nxt)]:
-                    if c.from_lane == idx and c.via == lane:
-                        if c.tls:
-                            sig = state.lights.get(c.tls, "")
-                            if 0 <= c.link_index < len(sig) and sig[c.link_index] in "rR":
-                                ev.append(Event(EventKind.RED_LIGHT, t, pos, c.tls, ego.x, ego.y))
-                        elif c.state in ("s", "w") and prev not in stopped:
-                            ev.append(Event(EventKind.STOP_SIGN, t, pos, net.edge_to_node.get(edge, ""),
-                                            ego.x, ego.y))
+            conns = [c for nxt in net.successors.get(edge, ()) for c in net.connections[(edge, nxt)]
+                     if c.from_lane == idx]
+            entered = next((c for c in conns if c.via == lane), None)
+            if entered is not None and entered.tls:
+                red = {c.to_edge for c in conns if c.tls and self._red(state.lights, c.tls, c.link_index)}
+                rest = {c.to_edge for c in conns if c.to_edge not in red}
+                if red and not rest:
+                    ev.append(Event(EventKind.RED_LIGHT, t, pos, entered.tls, ego.x, ego.y))
+                elif red:   # the movements from this lane disagree: wait to see which one it is
+                    pending = PendingLight(prev, ego.x, ego.y, entered.tls, frozenset(red), frozenset(rest))
+            elif entered is not None and entered.state in ("s", "w") and prev not in stopped:
+                ev.append(Event(EventKind.STOP_SIGN, t, pos, net.edge_to_node.get(edge, ""), ego.x, ego.y))
+        if pending is not None and lane:
+            if not lane.startswith(":"):
+                to_edge = lane.rsplit("_", 1)[0]
+            elif math.hypot(ego.x - pending.x, ego.y - pending.y) >= MOVEMENT_KNOWN_M:
+                to_edge = net.via_edges.get(lane, ("", ""))[1]
+            else:
+                to_edge = None
+            if to_edge is not None:
+                if to_edge in pending.red and to_edge not in pending.not_red:
+                    ev.append(Event(EventKind.RED_LIGHT, t, pos, pending.tls, ego.x, ego.y))
+                pending = None
         if lane and lane != prev and not lane.startswith(":") and lane in stopped:
             stopped = stopped - {lane}  # a fresh approach to this lane's end
         # roadside: the footprint left the drivable area (two corners or more off it)
@@ -198,4 +232,9 @@ class Sensors:
         tls = self.tls_ahead(prev_lane)
         lights = {tl: frame.tl_states[tl] for tl in tls} if tls else NO_LIGHTS
         return ev, SensorState(outside, lane_state, lane_state2, point.speed_limit, prev_lane, stopped, off,
-                               wrong, lights)
+                               wrong, lights, pending)
+
+    @staticmethod
+    def _red(lights: Mapping[str, str], tls: str, link_index: int) -> bool:
+        sig = lights.get(tls, "")
+        return 0 <= link_index < len(sig) and sig[link_index] in "rR"

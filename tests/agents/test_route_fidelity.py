@@ -153,3 +153,188 @@ def test_sumo_never_teleports_the_ego_out_of_a_queue(tmp_path):
     assert scenario.manifest["traffic"]["max_vehicles"] == 120   # Town03's leaderboard fleet
     log = run_episode(scenario, read_instruction_sets(instr)[0], RouteOracle())
     assert log.termination == "completed"
+
+
+class _OncomingAtGreen:
+    """Class D set-up on Town01's junction 54, where the left turn ``-1`` -> ``-25`` gets a
+    permissive ``g`` in the same phase as the oncoming straight ``2`` -> ``1`` gets ``G``: the
+    light is held red while the ego arrives, and an oncoming car stands at its line (its
+    front ``4`` m before it) until ``release`` s after the green starts (None: never).
+    Records the order in which the two pass the point where their paths cross."""
+
+    def __init__(self, release: float | None) -> None:
+        from icrsumo.sim.callbacks import EpisodeCallback
+
+        outer = self
+        self.release = release
+        self.order: list[tuple[str, float]] = []
+
+        class _Cb(EpisodeCallback):
+            def on_ready(self, episode):
+                ls = episode.backend.session.ls
+                ls.trafficlight.setPhase("54", 8)          # red for both movements
+                ls.trafficlight.setPhaseDuration("54", 25.0)
+                ls.route.add("oncoming", ["2", "1"])
+                ls.vehicle.add("foe", "oncoming", departPos="38", departSpeed="0", departLane="1")
+                outer.green = None
+
+            def on_step(self, episode, step):
+                ls = episode.backend.session.ls
+                if "foe" not in ls.vehicle.getIDList():
+                    return
+                if ls.trafficlight.getRedYellowGreenState("54")[5] == "G" and outer.green is None:
+                    outer.green = step.t
+                go = outer.green is not None and outer.release is not None and step.t - outer.green >= outer.release
+                ls.vehicle.setSpeed("foe", -1 if go else 0)
+                for who, past in (("ego", (":54_6_0", "-25_1")), ("foe", ("1_1",))):
+                    if who not in {o for o, _ in outer.order} and ls.vehicle.getLaneID(who) in past:
+                        outer.order.append((who, step.t))
+
+        self.callback = _Cb()
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("release", [0.0, 0.5])
+def test_permissive_left_waits_for_an_oncoming_car_that_stands_at_the_start_of_green(tmp_path, release):
+    """Class D: the oncoming car stands at the head of its queue when the light turns green;
+    it is about to go, and has the right of way (``G`` against the ego's ``g``). Before the
+    fix the ego, seeing it stand, turned in front of it and crossed its path 0.7-1.0 s after
+    it (a near miss 3.3 m apart); now it lets the car pass and follows it by more than 2 s."""
+    setup = _OncomingAtGreen(release)
+    _, log, result = drive(tmp_path, route_through("Town01", ["-1", "-25", "-10"], lane=1),
+                           traffic="none", callbacks=[setup.callback])
+    assert log.termination == "completed" and result.ds == 100.0
+    (first, t_first), (second, t_second) = setup.order
+    assert (first, second) == ("foe", "ego") and t_second - t_first > 2.0
+
+
+@pytest.mark.sumo
+def test_permissive_left_waits_for_a_standing_queue_head_only_so_long(tmp_path):
+    """Class D's wait is bounded: an oncoming car that never leaves its line (it may wait for
+    something the ego cannot see) holds the ego for STANDING_WAIT s, not until the time-out."""
+    from icrsumo.agents.privileged import STANDING_WAIT
+
+    setup = _OncomingAtGreen(None)
+    _, log, result = drive(tmp_path, route_through("Town01", ["-1", "-25", "-10"], lane=1),
+                           traffic="none", callbacks=[setup.callback])
+    assert log.termination == "completed" and result.ds == 100.0
+    assert [o for o, _ in setup.order] == ["ego"]
+    assert setup.order[0][1] - setup.green < STANDING_WAIT + 6.0
+
+
+@pytest.mark.sumo
+def test_red_light_is_judged_on_the_movement_the_ego_makes(tmp_path):
+    """Class B: Town02's junction 400 gives its approach lane ``-0_1`` a right turn (``G``) and
+    a straight-on movement (``r``) in one phase. This route drives straight through it first,
+    loops round and comes back to turn right on that phase; at the turn SUMO reports the ego
+    on the straight-on movement's internal lane for its first metres. Judged by that lane the
+    ego ran a red light (DS 49.0 before the fix); judged by the movement it makes, none."""
+    from icrsumo.sim.callbacks import EpisodeCallback
+
+    edges = ["-0", "-1", "-16", "12", "-3", "15", "14", "-10", "-11", "7", "18", "-2", "-0", "-4", "8"]
+
+    class Lights(EpisodeCallback):
+        def on_ready(self, episode):
+            self.lanes: list[str] = []
+            ls = episode.backend.session.ls
+            ls.trafficlight.setPhase("400", 0)      # straight on: G
+            ls.trafficlight.setPhaseDuration("400", 300.0)
+
+        def on_step(self, episode, step):
+            ls = episode.backend.session.ls
+            lane = ls.vehicle.getLaneID("ego")
+            if lane.startswith("-2_") and ls.trafficlight.getPhase("400") != 3:
+                ls.trafficlight.setPhase("400", 3)  # right G, straight on r
+                ls.trafficlight.setPhaseDuration("400", 300.0)
+            if not self.lanes or self.lanes[-1] != lane:
+                self.lanes.append(lane)
+
+    cb = Lights()
+    scenario, log, result = drive(tmp_path, route_through("Town02", edges, lane=1), traffic="none",
+                                  callbacks=[cb])
+    second = cb.lanes[cb.lanes.index("-2_1"):]
+    assert second[:3] == ["-2_1", ":2.0_1_0", "-0_1"] and ":400_5_0" in second   # SUMO's misreport
+    assert log.termination == "completed"
+    assert [e.kind for e in log.events] == [] and result.ds == 100.0
+
+
+class _StandingPedestrian:
+    """A pedestrian held standing at (``x``, ``y``) m for the whole episode (SUMO's person
+    moved there at every step)."""
+
+    def __init__(self, x: float, y: float) -> None:
+        from icrsumo.sim.callbacks import EpisodeCallback
+
+        class _Cb(EpisodeCallback):
+            def on_ready(self, episode):
+                ls = episode.backend.session.ls
+                ls.person.add("ped", "-25", 1.0)
+                ls.person.appendWaitingStage("ped", 3600.0)
+
+            def on_step(self, episode, step):
+                ls = episode.backend.session.ls
+                ls.person.moveToXY("ped", "", x, y, keepRoute=2)
+                self.lane = ls.person.getLaneID("ped")
+
+        self.callback = _Cb()
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize(("x", "where", "passes"), [
+    (152.1, ":54_w2_0", True),    # on the kerb's walking area, 2.2 m beside the ego's path
+    (153.3, ":54_c1_0", False),   # on the crossing, inside the ego's swept path
+])
+def test_a_pedestrian_standing_on_the_kerb_does_not_stop_the_ego(tmp_path, x, where, passes):
+    """Class E: at Town01's junction 54 the ego turns left onto ``-25`` over the crossing
+    ``:54_c1``; a pedestrian stands at its kerb. Counted within 2.5 m of the path, one 2.2 m
+    away held the ego short of the crossing until the blocked rule ended the run (and SUMO's
+    pedestrians do not step out in front of a car that close: a stand-off). A standing
+    pedestrian now counts only inside the swept path (half the ego's width + 0.5 m)."""
+    ped = _StandingPedestrian(x, 320.6)
+    _, log, result = drive(tmp_path, route_through("Town01", ["-1", "-25", "-10"], lane=1),
+                           traffic="none", callbacks=[ped.callback])
+    assert ped.callback.lane == where
+    assert (log.termination == "completed") is passes
+    if not passes:
+        assert log.termination == "agent_blocked" and not any(e.kind == "collision_pedestrian" for e in log.events)
+
+
+@pytest.mark.sumo
+def test_no_roadside_event_from_a_sliver_between_lane_outlines():
+    """Class G on the fidelity suite's route carla_fidelity_mixed_000 (Town01): the ego's
+    footprint touches a wedge between two lanes' flat-capped outlines that no junction outline
+    covers. With the outlines alone (no joints, no closing, no tolerance) two of its corners
+    are off at once and a roadside event cost the route DS 65.0; with the drivable area as
+    built now, none."""
+    import shapely
+
+    from icrsumo.agents.privileged import RouteOracle
+    from icrsumo.cache import bundled_route
+    from icrsumo.dynamics import EgoState
+    from icrsumo.instructions.store import read_instruction_sets
+    from icrsumo.metrics import score_episode
+    from icrsumo.scenario import read_scenario
+    from icrsumo.sim.drivable import DrivableArea, _polygonal, drivable_area, lane_polygons
+    from icrsumo.sim.episode import run_episode
+    from icrsumo.sim.sensors import off_corners
+
+    sc_dir, instr = bundled_route("carla_fidelity_mixed_000", "carla-fidelity")
+    scenario = read_scenario(sc_dir)
+    log = run_episode(scenario, read_instruction_sets(instr)[0], RouteOracle())
+    assert log.termination == "completed" and score_episode(log).ds == 100.0
+    net = load_net(scenario.net)
+    size = (float(scenario.manifest["ego"]["length"]), float(scenario.manifest["ego"]["width"]))
+    sn = net.sumolib_net
+    junctions = [_polygonal(shapely.make_valid(shapely.Polygon([p[:2] for p in n.getShape()])))
+                 for n in sn.getNodes() if len(n.getShape()) >= 3]
+    walking = [_polygonal(shapely.make_valid(shapely.Polygon([p[:2] for p in lane.getShape()])))
+               for e in sn.getEdges(withInternal=True) if e.getFunction() == "walkingarea"
+               for lane in e.getLanes() if len(lane.getShape()) >= 3]
+    outlines = DrivableArea(_polygonal(shapely.union_all(
+        [*lane_polygons(net), shapely.difference(shapely.union_all(junctions), shapely.union_all(walking))])))
+    now = drivable_area(net)
+    worst_then = max(off_corners(EgoState(x, y, h, 0.0), size, outlines.count_off)
+                     for x, y, h in zip(log.x, log.y, log.yaw))
+    worst_now = max(off_corners(EgoState(x, y, h, 0.0), size, now.count_off)
+                    for x, y, h in zip(log.x, log.y, log.yaw))
+    assert worst_then >= 2 and worst_now <= 1
