@@ -24,12 +24,13 @@ import numpy as np
 
 from ..dynamics import VehicleParams
 from ..instructions.intent import classify_intent
-from ..networks import Connection, RoadNet, load_net
+from ..networks import Connection, RoadNet, load_net, polyline_cumlen
 from ..types import Intent
 from .base import Action, EpisodeInfo, Observation, World
 from .conflicts import Conflict, ConflictMap, junction_of, project
 
 COMFORT_DECEL = 3.0      # m/s^2 used to plan stops
+STOP_LAG = 1.0           # m/s the planned stopping speed is lowered by (the PI controller trails it)
 LAT_ACCEL = 2.0          # m/s^2 allowed in curves
 MIN_GAP = 4.0            # m kept to the vehicle or pedestrian ahead (bumper to bumper)
 STOP_MARGIN = 1.0        # m before a stop line (front bumper)
@@ -274,7 +275,8 @@ class PathDriver(ABC):
                 min(allowed, key=lambda i: (abs(i - cur), i))
             if want != cur:
                 step = 1 if want > cur else -1
-                committed = first and self._change is not None and self._change[:2] == (edge, cur + step)
+                committed = first and self._change is not None and self._change[:2] == (edge, cur + step) \
+                    and not self._coming_up(w, edge, cur + step, start)
                 if first and not committed and not self._lane_free(w, edge, cur + step, start):
                     # wait for a gap: no way on from this lane, so stop where the change still fits
                     pieces.append(_Piece(f"{edge}_{cur}", start, length))
@@ -360,29 +362,49 @@ class PathDriver(ABC):
             else np.zeros(1)
         return _Path(points, c, np.array(speeds) if speeds else np.zeros(1), stops, junctions=junctions)
 
-    def _lane_free(self, w: World, edge: str, lane_index: int, pos: float) -> bool:
-        """No vehicle on the target lane near the ego (from 12 m behind to 10 m ahead of its
-        front when moving, only the footprint plus 3 m either way when (nearly) stopped), and
-        none coming up from behind that would reach the ego's rear within
-        :data:`CHANGE_GAP_TIME` s at its closing speed: a gap is judged by time, not distance
-        alone, or a car 10 m back at 12 m/s runs into a change begun from a standstill."""
-        if len(w.vehicles) == 0:
-            return True
-        lane = f"{edge}_{lane_index}"
-        x0, y0, h = self.net.lane_pose(lane, pos)
+    def _lane_frame(self, w: World, edge: str, lane_index: int, pos: float) -> tuple[np.ndarray, ...]:
+        """Every vehicle's centre in the frame of lane ``lane_index`` of ``edge`` at lane
+        position ``pos`` m: along (m, ahead positive) and across it (m), and its half length."""
+        x0, y0, h = self.net.lane_pose(f"{edge}_{lane_index}", pos)
         d = w.vehicles[:, :2] - np.array([x0, y0])
         lon = d[:, 0] * math.cos(h) + d[:, 1] * math.sin(h)
         lat = -d[:, 0] * math.sin(h) + d[:, 1] * math.cos(h)
-        half = 0.5 * w.vehicles[:, 3]
-        on_lane = np.abs(lat) < 1.8
+        return lon, lat, 0.5 * w.vehicles[:, 3]
+
+    def _lane_free(self, w: World, edge: str, lane_index: int, pos: float) -> bool:
+        """No vehicle on the target lane near the ego (from 12 m behind to 10 m ahead of its
+        front when moving, only the footprint plus 3 m either way when (nearly) stopped), and
+        none coming up from behind too fast (:meth:`_coming_up`): a gap is judged by time, not
+        distance alone, or a car 10 m back at 12 m/s runs into a change begun from a standstill."""
+        if len(w.vehicles) == 0:
+            return True
+        lon, lat, half = self._lane_frame(w, edge, lane_index, pos)
         behind, ahead = (12.0, 10.0) if w.ego.speed > 1.0 else (self.params.length + 3.0, 3.0)
-        if np.any(on_lane & (lon + half > -behind) & (lon - half < ahead)):
+        if np.any((np.abs(lat) < 1.8) & (lon + half > -behind) & (lon - half < ahead)):
             return False
+        return not self._coming_up(w, edge, lane_index, pos)
+
+    def _coming_up(self, w: World, edge: str, lane_index: int, pos: float) -> bool:
+        """Whether a vehicle on lane ``lane_index`` of ``edge`` comes up from behind the ego
+        (front at lane position ``pos`` m) and would reach its rear within
+        :data:`CHANGE_GAP_TIME` s at its closing speed. Checked again during a change while
+        SUMO still has the ego on its old lane: the car behind does not see it yet."""
+        if len(w.vehicles) == 0:
+            return False
+        lane = f"{edge}_{lane_index}"
+        shape = self.net.lane_shape[lane]
+        cum = polyline_cumlen(shape)
+        scale = self.net.lane_length[lane] / max(float(cum[-1]), 1e-9)   # lane position per shape m
+        # along the lane's own polyline: on a curved lane a car 25 m back lies metres off the
+        # straight line through the ego's position
+        s_v = project(shape, cum, w.vehicles[:, :2], w.vehicles[:, 2], corridor=1.8) * scale
+        half = 0.5 * w.vehicles[:, 3]
         speeds = self._speeds if len(self._speeds) == len(w.vehicles) else np.full(len(w.vehicles), np.nan)
         closing = np.where(np.isfinite(speeds), speeds, UNSEEN_SPEED) - w.ego.speed
-        gap = -(lon + half) - self.params.length   # its front to the ego's rear, m
-        coming = on_lane & (gap > 0.0) & (gap < CHANGE_LOOK_BEHIND) & (gap < CHANGE_GAP_TIME * closing)
-        return not bool(coming.any())
+        gap = pos - self.params.length - (s_v + half)   # its front to the ego's rear, m
+        coming = np.isfinite(gap) & (gap > 0.0) & (gap < CHANGE_LOOK_BEHIND) & \
+            (gap < CHANGE_GAP_TIME * closing)
+        return bool(coming.any())
 
     # ----------------------------------------------------------------- speed
     def _on_path(self, path: _Path, xy: np.ndarray, half: np.ndarray | float) -> np.ndarray:
@@ -390,6 +412,19 @@ class PathDriver(ABC):
         if len(xy) == 0:
             return np.zeros(0)
         return project(path.points, path.cum, xy, corridor=CORRIDOR + half)
+
+    def _corners_on_path(self, path: _Path, vehicles: np.ndarray) -> np.ndarray:
+        """Arc position (m) on the path of each corner of each vehicle's footprint ((N, 4);
+        NaN for a corner outside the ego's swept path, half its width + :data:`SWEPT_MARGIN`)."""
+        x, y, yaw, hl, hw = (vehicles[:, 0], vehicles[:, 1], vehicles[:, 2], 0.5 * vehicles[:, 3],
+                             0.5 * vehicles[:, 4])
+        c, s = np.cos(yaw), np.sin(yaw)
+        lon = np.array([1.0, 1.0, -1.0, -1.0])[None, :] * hl[:, None]
+        lat = np.array([1.0, -1.0, -1.0, 1.0])[None, :] * hw[:, None]
+        pts = np.stack([x[:, None] + lon * c[:, None] - lat * s[:, None],
+                        y[:, None] + lon * s[:, None] + lat * c[:, None]], axis=-1)
+        reach = 0.5 * self.params.width + SWEPT_MARGIN
+        return project(path.points, path.cum, pts.reshape(-1, 2), corridor=reach).reshape(len(vehicles), 4)
 
     def _target_speed(self, w: World, path: _Path, t: float) -> float:
         ego = w.ego
@@ -410,8 +445,13 @@ class PathDriver(ABC):
         # vehicles and pedestrians on the path
         if len(w.vehicles):
             s = self._on_path(path, w.vehicles[:, :2], 0.5 * w.vehicles[:, 4])
-            gaps = s - 0.5 * w.vehicles[:, 3]
-            gaps = gaps[np.isfinite(gaps) & (s > 0.5)]
+            gaps = np.where(np.isfinite(s) & (s > 0.5), s - 0.5 * w.vehicles[:, 3], np.inf)
+            # a car at an angle to the path (part-way through a turn) reaches into it with a
+            # corner while its centre lies outside the corridor: its nearest corner on the path
+            corners = self._corners_on_path(path, w.vehicles)
+            corners = np.where(np.isfinite(corners) & (corners > 0.5), corners, np.inf).min(axis=1)
+            gaps = np.minimum(gaps, corners)
+            gaps = gaps[np.isfinite(gaps)]
             if len(gaps):
                 stop_s = min(stop_s, float(gaps.min()) - MIN_GAP)
         if len(w.pedestrians):
@@ -445,7 +485,8 @@ class PathDriver(ABC):
                 stop_s = min(stop_s, s_line - STOP_MARGIN)
         stop_s = min(stop_s, path.hold, self._yield_stop(w, path))
         if math.isfinite(stop_s):
-            v = min(v, math.sqrt(2 * COMFORT_DECEL * max(0.0, stop_s)))
+            # the speed controller trails its target by about STOP_LAG m/s while braking
+            v = min(v, max(0.0, math.sqrt(2 * COMFORT_DECEL * max(0.0, stop_s)) - STOP_LAG))
             if stop_s < 0.5:
                 v = 0.0
         return max(0.0, v)

@@ -72,6 +72,64 @@ def add_ego(ls, scenario: Scenario) -> None:
                    departPos=f"{scenario.start_pos:.2f}", departSpeed="0")
 
 
+#: m/s^2 a background car is assumed to brake with when the ego appears in front of it
+START_BRAKE = 4.5
+#: s a background car takes to react to the ego appearing in front of it
+START_REACTION = 1.0
+
+
+def clear_start(ls, x: float, y: float, yaw: float, scenario: Scenario) -> list[str]:
+    """Remove the background vehicles that could not stop for the ego appearing at its start
+    (front bumper at (x, y) m heading ``yaw`` rad): those in its lane's corridor (1.8 m either
+    side, heading within 60 degrees of it) whose front is behind the ego's rear by less than
+    their stopping distance (``START_REACTION`` s, then ``START_BRAKE`` m/s^2, + 2 m) or that
+    overlap its footprint. Without this a car arriving at 13 m/s rear-ends the standing ego
+    half a second into the episode. Returns the removed ids (sorted)."""
+    length = float(scenario.manifest["ego"]["length"])
+    c, s = math.cos(yaw), math.sin(yaw)
+    gone = []
+    for vid in sorted(ls.vehicle.getIDList()):
+        if vid == EGO_ID:
+            continue
+        vx, vy = ls.vehicle.getPosition(vid)            # its front bumper
+        lon, lat = (vx - x) * c + (vy - y) * s, -(vx - x) * s + (vy - y) * c
+        heading = math.radians(90.0 - ls.vehicle.getAngle(vid))
+        if abs(lat) > 1.8 or abs((heading - yaw + math.pi) % (2 * math.pi) - math.pi) > math.pi / 3:
+            continue
+        v = ls.vehicle.getSpeed(vid)
+        behind = -length - lon                          # its front to the ego's rear, m
+        stopping = v * START_REACTION + v * v / (2 * START_BRAKE) + 2.0
+        if behind < stopping and lon - ls.vehicle.getLength(vid) < 1.0:
+            ls.vehicle.remove(vid)
+            gone.append(vid)
+    return gone
+
+
+def remove_background_collisions(ls) -> tuple[str, ...]:
+    """Remove the background vehicles that collided in the last step with another background
+    vehicle or a pedestrian (never the ego, never a pedestrian). The scenarios keep SUMO's
+    ``collision.action warn`` so that the ego's contacts are recorded and it drives on; two
+    background cars that touch inside a junction (SUMO's junction model lets foes in now and
+    then) would otherwise stand interlocked for good, a wall no driver could pass. SUMO's own
+    ``teleport`` action does the same to both parties. Returns the removed ids (sorted)."""
+    colls = ls.simulation.getCollisions()
+    if not colls:
+        return ()
+    gone = set()
+    persons = None
+    for c in colls:
+        if EGO_ID in (c.collider, c.victim):
+            continue
+        if persons is None:
+            persons = set(ls.person.getIDList())
+        gone.update(v for v in (c.collider, c.victim) if v not in persons)
+    present = set(ls.vehicle.getIDList()) if gone else set()
+    removed = tuple(sorted(v for v in gone if v in present))
+    for v in removed:
+        ls.vehicle.remove(v)
+    return removed
+
+
 class SumoSession:
     """One SUMO run of a scenario: ``with SumoSession(sc) as s: s.step()``.
 
@@ -160,6 +218,7 @@ class SumoBackend:
         self.context_radius = context_radius
         self._session: SumoSession | None = None
         self.tls_ids: tuple[str, ...] = ()
+        self._removed: tuple[str, ...] = ()   # background vehicles removed in the last step
 
     def __enter__(self) -> SumoBackend:
         return self
@@ -203,6 +262,7 @@ class SumoBackend:
         tc = self._tc
         with _translated():
             ls = self._session.ls
+            clear_start(ls, x, y, yaw, self.scenario)
             add_ego(ls, self.scenario)
             ls.vehicle.setSpeedMode(EGO_ID, 0)
             ls.vehicle.setLaneChangeMode(EGO_ID, 0)
@@ -224,8 +284,13 @@ class SumoBackend:
             self._session.ls.vehicle.moveToXY(EGO_ID, "", -1, x, y, 90.0 - math.degrees(yaw), 2)
 
     def step(self) -> None:
+        """One SUMO step; background vehicles that collided with each other in it are removed
+        (:func:`remove_background_collisions`) and reported by the next :meth:`read` as
+        teleports."""
         with _translated():
-            self._session.ls.simulationStep()
+            ls = self._session.ls
+            ls.simulationStep()
+            self._removed = remove_background_collisions(ls)
 
     def read(self, surroundings: bool = False,
              lights: Callable[[str], Sequence[str]] | None = None) -> SimFrame:
@@ -255,6 +320,8 @@ class SumoBackend:
                 contacts = tuple(found)
             teleports = ls.simulation.getStartingTeleportIDList()
             teleports = tuple(v for v in teleports if v != EGO_ID) if teleports else ()
+            if self._removed:
+                teleports += self._removed
             lane, tl_var = sub.get(self._lane_var, ""), self._tl_var
             if surroundings or lights is None:
                 tl_all = ls.trafficlight.getAllSubscriptionResults()
