@@ -21,6 +21,10 @@ from ..networks import Connection, RoadNet, polyline_cumlen
 
 #: m between two internal lanes' centre lines below which they conflict (two car widths)
 CONFLICT_M = 2.0
+#: m between two merging lanes' centre lines below which two cars on them touch (widths + margin)
+MERGE_M = 3.0
+#: m between the points at which a merge's lanes are tested for where they first meet
+MERGE_STEP = 0.5
 #: m of a foe's incoming lane, before the junction, over which its vehicles are watched
 APPROACH_M = 70.0
 
@@ -91,7 +95,14 @@ class ConflictMap:
             foe_line = LineString(theirs)
             merge = (foe.to_edge, foe.to_lane) == (conn.to_edge, conn.to_lane)
             if merge:
+                # two lanes that end on one lane converge over metres: they meet where they
+                # first come within MERGE_M (two cars side by side), not at their common end
                 s_ours, s_foe_via = line.length, foe_line.length
+                for s_at in np.arange(0.0, line.length, MERGE_STEP):
+                    point = line.interpolate(s_at)
+                    if point.distance(foe_line) < MERGE_M:
+                        s_ours, s_foe_via = float(s_at), foe_line.project(point)
+                        break
             elif line.distance(foe_line) < CONFLICT_M:
                 p_ours, p_foe = nearest_points(line, foe_line)
                 s_ours, s_foe_via = line.project(p_ours), foe_line.project(p_foe)

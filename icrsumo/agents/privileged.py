@@ -30,6 +30,7 @@ from .base import Action, EpisodeInfo, Observation, World
 from .conflicts import Conflict, ConflictMap, junction_of, project
 
 COMFORT_DECEL = 3.0      # m/s^2 used to plan stops
+HARD_DECEL = 6.0         # m/s^2 the ego can brake with when it must (a conflict point inside a junction)
 STOP_LAG = 1.0           # m/s the planned stopping speed is lowered by (the PI controller trails it)
 LAT_ACCEL = 2.0          # m/s^2 allowed in curves
 MIN_GAP = 4.0            # m kept to the vehicle or pedestrian ahead (bumper to bumper)
@@ -52,6 +53,7 @@ YIELD_MARGIN = 2.0       # s the ego keeps between clearing a conflict point and
 CHANGE_GAP_TIME = 3.0    # s a vehicle coming up behind on the target lane must be away at its closing speed
 CHANGE_LOOK_BEHIND = 80.0  # m behind the ego's rear within which such vehicles are checked
 PED_MOVING = 0.3         # m/s above which a pedestrian counts as walking
+STANDING_CLEAR = 0.25    # m beyond the ego's half width within which a standing car's body is in its way
 SWEPT_MARGIN = 0.5       # m beyond the ego's half width within which a standing pedestrian is in its way
 FOE_ACCEL = 2.6          # m/s^2 a foe is assumed to accelerate with (SUMO's default passenger car)
 FOE_TOP_SPEED = 13.89    # m/s a foe accelerates to at most when its arrival is estimated
@@ -413,9 +415,9 @@ class PathDriver(ABC):
             return np.zeros(0)
         return project(path.points, path.cum, xy, corridor=CORRIDOR + half)
 
-    def _corners_on_path(self, path: _Path, vehicles: np.ndarray) -> np.ndarray:
+    def _corners_on_path(self, path: _Path, vehicles: np.ndarray, margin: np.ndarray) -> np.ndarray:
         """Arc position (m) on the path of each corner of each vehicle's footprint ((N, 4);
-        NaN for a corner outside the ego's swept path, half its width + :data:`SWEPT_MARGIN`)."""
+        NaN for a corner outside the ego's swept path, half its width + ``margin`` (N,) m)."""
         x, y, yaw, hl, hw = (vehicles[:, 0], vehicles[:, 1], vehicles[:, 2], 0.5 * vehicles[:, 3],
                              0.5 * vehicles[:, 4])
         c, s = np.cos(yaw), np.sin(yaw)
@@ -423,7 +425,7 @@ class PathDriver(ABC):
         lat = np.array([1.0, -1.0, -1.0, 1.0])[None, :] * hw[:, None]
         pts = np.stack([x[:, None] + lon * c[:, None] - lat * s[:, None],
                         y[:, None] + lon * s[:, None] + lat * c[:, None]], axis=-1)
-        reach = 0.5 * self.params.width + SWEPT_MARGIN
+        reach = np.repeat(0.5 * self.params.width + margin, 4)
         return project(path.points, path.cum, pts.reshape(-1, 2), corridor=reach).reshape(len(vehicles), 4)
 
     def _target_speed(self, w: World, path: _Path, t: float) -> float:
@@ -444,11 +446,18 @@ class PathDriver(ABC):
         stop_s = math.inf
         # vehicles and pedestrians on the path
         if len(w.vehicles):
-            s = self._on_path(path, w.vehicles[:, :2], 0.5 * w.vehicles[:, 4])
+            # a moving car counts within CORRIDOR of the path; a standing one only where its
+            # body reaches into the ego's own width (+ STANDING_CLEAR): passing a car that waits
+            # beside the path, at a merge say, breaks a stand-off in which each waits for the other
+            v_f = self._speeds if len(self._speeds) == len(w.vehicles) else np.full(len(w.vehicles), np.nan)
+            still = np.isfinite(v_f) & (v_f <= MOVING)
+            half_w = 0.5 * w.vehicles[:, 4]
+            standing_reach = 0.5 * self.params.width + STANDING_CLEAR - CORRIDOR + half_w
+            s = self._on_path(path, w.vehicles[:, :2], np.where(still, standing_reach, half_w))
             gaps = np.where(np.isfinite(s) & (s > 0.5), s - 0.5 * w.vehicles[:, 3], np.inf)
             # a car at an angle to the path (part-way through a turn) reaches into it with a
             # corner while its centre lies outside the corridor: its nearest corner on the path
-            corners = self._corners_on_path(path, w.vehicles)
+            corners = self._corners_on_path(path, w.vehicles, np.where(still, STANDING_CLEAR, SWEPT_MARGIN))
             corners = np.where(np.isfinite(corners) & (corners > 0.5), corners, np.inf).min(axis=1)
             gaps = np.minimum(gaps, corners)
             gaps = gaps[np.isfinite(gaps)]
@@ -579,7 +588,8 @@ class PathDriver(ABC):
                 continue
             if at_line:
                 stop = min(stop, s_entry - STOP_MARGIN)
-            elif s_c - CONFLICT_CLEAR > 1.0:
+            elif s_c - CONFLICT_CLEAR > w.ego.speed ** 2 / (2 * HARD_DECEL) - 0.5:
+                # still able to stop short of it (or standing there already): do
                 stop = min(stop, s_c - CONFLICT_CLEAR)
         return stop
 
