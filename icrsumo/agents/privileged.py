@@ -104,6 +104,8 @@ class _Path:
     stops: list[tuple[float, Connection]] = field(default_factory=list)   # (s of stop line, conn)
     hold: float = math.inf                   # s (m) where the ego must stop: no way on from its lane yet
     junctions: list[tuple[float, Connection]] = field(default_factory=list)  # (s of junction entry, conn)
+    first_line: float = math.inf             # s (m) of the nearest lane end the ego may still cross first
+    first_edge: str = ""                     # the normal edge the plan starts on ("" inside a junction)
 
 
 def _lane_edge(lane: str) -> str:
@@ -258,7 +260,7 @@ class PathDriver(ABC):
                 self._change = None
                 self.entered(w, edge)
         first = True
-        hold = math.inf
+        hold = first_line = math.inf
         while total < HORIZON and edge in net.passenger_lanes:
             length = net.edge_length[edge]
             options = self._options(edge)
@@ -281,9 +283,13 @@ class PathDriver(ABC):
                     and not self._coming_up(w, edge, cur + step, start)
                 if first and not committed and not self._lane_free(w, edge, cur + step, start):
                     # wait for a gap: no way on from this lane, so stop where the change still fits
+                    self._change = None   # and begin the change afresh once there is one
                     pieces.append(_Piece(f"{edge}_{cur}", start, length))
                     hold = total + max(0.0, length - start - WAIT_BEFORE_END)
                     break
+                if first:   # mid-change the ego may reach its old lane's end (stop lines stagger)
+                    first_line = total + min(net.lane_length[f"{edge}_{k}"] for k in
+                                             range(min(cur, want), max(cur, want) + 1)) - start
                 ends = self._change_ends(edge, cur, want, start, length, first, committed)
                 pieces.append(_Piece(f"{edge}_{cur}", start, start))
                 pieces += [_Piece(f"{edge}_{cur + step * (k + 1)}", e, e) for k, e in enumerate(ends[:-1])]
@@ -303,7 +309,8 @@ class PathDriver(ABC):
                 total += net.lane_length[v]
             edge, cur, start, first = nxt, conn.to_lane, 0.0, False
         path = self._make_path(pieces, w)
-        path.hold = hold
+        path.hold, path.first_line = hold, first_line
+        path.first_edge = "" if lane.startswith(":") else _lane_edge(lane)
         return path
 
     def _onward(self, w: World, edge: str, nxt: str) -> tuple[Connection, ...]:
@@ -382,7 +389,12 @@ class PathDriver(ABC):
             return True
         lon, lat, half = self._lane_frame(w, edge, lane_index, pos)
         behind, ahead = (12.0, 10.0) if w.ego.speed > 1.0 else (self.params.length + 3.0, 3.0)
-        if np.any((np.abs(lat) < 1.8) & (lon + half > -behind) & (lon - half < ahead)):
+        # on the target lane, or between it and the ego (a car changing lanes towards it)
+        x0, y0, h = self.net.lane_pose(f"{edge}_{lane_index}", pos)
+        ego_lat = -(w.ego.x - x0) * math.sin(h) + (w.ego.y - y0) * math.cos(h)
+        lo, hi = sorted((-1.8 * np.sign(ego_lat), 0.7 * ego_lat))
+        lane_band = (np.abs(lat) < 1.8) | ((lat > lo) & (lat < hi))
+        if np.any(lane_band & (lon + half > -behind) & (lon - half < ahead)):
             return False
         return not self._coming_up(w, edge, lane_index, pos)
 
@@ -475,6 +487,8 @@ class PathDriver(ABC):
                 stop_s = min(stop_s, float(s.min()) - MIN_GAP)
         # traffic lights, stop signs and yielding at minor links
         for s_line, conn in path.stops:
+            if conn.from_edge == path.first_edge:
+                s_line = min(s_line, path.first_line)
             if self._rank(w, conn) == 1:  # a minor link: arrive slowly enough to give way
                 v = min(v, math.sqrt(MINOR_ENTRY_SPEED ** 2 + 2 * COMFORT_DECEL * max(0.0, s_line)))
             key = f"{conn.from_edge}_{conn.from_lane}>{conn.via}"
