@@ -693,6 +693,12 @@ class InstructionFollower(PathDriver):
             self._instr_id = obs.instruction_id
             self.intent = classify_intent(obs.instruction) if obs.instruction else Intent.FOLLOW
             self._lane_at_instr = None
+            # a new instruction before the junction is entered may name another branch: the
+            # branch is chosen again (a route that starts a few metres before a junction meets
+            # its turn instruction after the choice was made)
+            lane = obs.world.lane if obs.world is not None else ""
+            if lane and not lane.startswith(":"):
+                self._decided.pop(_lane_edge(lane), None)
 
     def preferred_lane(self, w: World, edge: str, lanes: tuple[int, ...], current: int) -> int:
         if self.intent in (Intent.LANE_LEFT, Intent.LANE_RIGHT) and self._instr_id not in self._lane_done:

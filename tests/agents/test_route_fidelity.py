@@ -402,3 +402,22 @@ def test_traced_fidelity_routes_drive_clean(route, before):
     sc_dir, instr = bundled_route(route, "carla-fidelity")
     log = run_episode(read_scenario(sc_dir), read_instruction_sets(instr)[0], RouteOracle())
     assert log.termination == "completed" and score_episode(log).ds == 100.0, before
+
+
+@pytest.mark.sumo
+def test_instruction_follower_chooses_again_when_a_new_instruction_comes_before_the_junction():
+    """carla_fidelity_junctions_009 (Town05) starts a few metres before a junction: the
+    follower chose its branch under the first instruction ("Prepare to change to the left
+    lane.") and went straight on before "At the traffic light, turn left." became active
+    (route deviation at RC 2.4). A new instruction before the junction's entry now reopens
+    the choice."""
+    from icrsumo.agents.privileged import InstructionFollower
+    from icrsumo.cache import bundled_route
+    from icrsumo.instructions.store import read_instruction_sets
+    from icrsumo.metrics import score_episode
+    from icrsumo.scenario import read_scenario
+    from icrsumo.sim.episode import run_episode
+
+    sc_dir, instr = bundled_route("carla_fidelity_junctions_009", "carla-fidelity")
+    log = run_episode(read_scenario(sc_dir), read_instruction_sets(instr)[0], InstructionFollower())
+    assert log.termination == "completed" and score_episode(log).rc == 100.0
