@@ -75,6 +75,11 @@ def arrival_time(dist: np.ndarray, speed: np.ndarray, accel: float = FOE_ACCEL,
     return np.where(dist <= d_top, t_acc, t_top + (dist - d_top) / cruise)
 
 
+def _known(speeds: np.ndarray, n: int) -> np.ndarray:
+    """``speeds`` (m/s) when they belong to the ``n`` objects seen now, else (n,) NaN."""
+    return speeds if len(speeds) == n else np.full(n, np.nan)
+
+
 def _speeds_since(seen: tuple[float, np.ndarray] | None, t: float, xy: np.ndarray) -> np.ndarray:
     """Speed (m/s) of each point of ``xy`` ((N, 2) m at time ``t`` s) from the nearest point of
     ``seen`` = (time s, (M, 2) m) within 3 m; NaN where none is (or nothing was seen)."""
@@ -104,8 +109,6 @@ class _Path:
     stops: list[tuple[float, Connection]] = field(default_factory=list)   # (s of stop line, conn)
     hold: float = math.inf                   # s (m) where the ego must stop: no way on from its lane yet
     junctions: list[tuple[float, Connection]] = field(default_factory=list)  # (s of junction entry, conn)
-    first_line: float = math.inf             # s (m) of the nearest lane end the ego may still cross first
-    first_edge: str = ""                     # the normal edge the plan starts on ("" inside a junction)
 
 
 def _lane_edge(lane: str) -> str:
@@ -309,8 +312,12 @@ class PathDriver(ABC):
                 total += net.lane_length[v]
             edge, cur, start, first = nxt, conn.to_lane, 0.0, False
         path = self._make_path(pieces, w)
-        path.hold, path.first_line = hold, first_line
-        path.first_edge = "" if lane.startswith(":") else _lane_edge(lane)
+        path.hold = hold
+        # mid-change, the first junction's stop line is the nearest of the lanes' ends
+        if math.isfinite(first_line) and not lane.startswith(":"):
+            first_edge = _lane_edge(lane)
+            path.stops = [(min(s_line, first_line) if c.from_edge == first_edge else s_line, c)
+                          for s_line, c in path.stops]
         return path
 
     def _onward(self, w: World, edge: str, nxt: str) -> tuple[Connection, ...]:
@@ -371,15 +378,6 @@ class PathDriver(ABC):
             else np.zeros(1)
         return _Path(points, c, np.array(speeds) if speeds else np.zeros(1), stops, junctions=junctions)
 
-    def _lane_frame(self, w: World, edge: str, lane_index: int, pos: float) -> tuple[np.ndarray, ...]:
-        """Every vehicle's centre in the frame of lane ``lane_index`` of ``edge`` at lane
-        position ``pos`` m: along (m, ahead positive) and across it (m), and its half length."""
-        x0, y0, h = self.net.lane_pose(f"{edge}_{lane_index}", pos)
-        d = w.vehicles[:, :2] - np.array([x0, y0])
-        lon = d[:, 0] * math.cos(h) + d[:, 1] * math.sin(h)
-        lat = -d[:, 0] * math.sin(h) + d[:, 1] * math.cos(h)
-        return lon, lat, 0.5 * w.vehicles[:, 3]
-
     def _lane_free(self, w: World, edge: str, lane_index: int, pos: float) -> bool:
         """No vehicle on the target lane near the ego (from 12 m behind to 10 m ahead of its
         front when moving, only the footprint plus 3 m either way when (nearly) stopped), and
@@ -387,11 +385,14 @@ class PathDriver(ABC):
         distance alone, or a car 10 m back at 12 m/s runs into a change begun from a standstill."""
         if len(w.vehicles) == 0:
             return True
-        lon, lat, half = self._lane_frame(w, edge, lane_index, pos)
+        x0, y0, h = self.net.lane_pose(f"{edge}_{lane_index}", pos)
+        c, s = math.cos(h), math.sin(h)
+        d = w.vehicles[:, :2] - np.array([x0, y0])
+        lon, lat = d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c
+        half = 0.5 * w.vehicles[:, 3]
         behind, ahead = (12.0, 10.0) if w.ego.speed > 1.0 else (self.params.length + 3.0, 3.0)
         # on the target lane, or between it and the ego (a car changing lanes towards it)
-        x0, y0, h = self.net.lane_pose(f"{edge}_{lane_index}", pos)
-        ego_lat = -(w.ego.x - x0) * math.sin(h) + (w.ego.y - y0) * math.cos(h)
+        ego_lat = -(w.ego.x - x0) * s + (w.ego.y - y0) * c
         lo, hi = sorted((-1.8 * np.sign(ego_lat), 0.7 * ego_lat))
         lane_band = (np.abs(lat) < 1.8) | ((lat > lo) & (lat < hi))
         if np.any(lane_band & (lon + half > -behind) & (lon - half < ahead)):
@@ -413,7 +414,7 @@ class PathDriver(ABC):
         # straight line through the ego's position
         s_v = project(shape, cum, w.vehicles[:, :2], w.vehicles[:, 2], corridor=1.8) * scale
         half = 0.5 * w.vehicles[:, 3]
-        speeds = self._speeds if len(self._speeds) == len(w.vehicles) else np.full(len(w.vehicles), np.nan)
+        speeds = _known(self._speeds, len(w.vehicles))
         closing = np.where(np.isfinite(speeds), speeds, UNSEEN_SPEED) - w.ego.speed
         gap = pos - self.params.length - (s_v + half)   # its front to the ego's rear, m
         coming = np.isfinite(gap) & (gap > 0.0) & (gap < CHANGE_LOOK_BEHIND) & \
@@ -461,7 +462,7 @@ class PathDriver(ABC):
             # a moving car counts within CORRIDOR of the path; a standing one only where its
             # body reaches into the ego's own width (+ STANDING_CLEAR): passing a car that waits
             # beside the path, at a merge say, breaks a stand-off in which each waits for the other
-            v_f = self._speeds if len(self._speeds) == len(w.vehicles) else np.full(len(w.vehicles), np.nan)
+            v_f = _known(self._speeds, len(w.vehicles))
             still = np.isfinite(v_f) & (v_f <= MOVING)
             half_w = 0.5 * w.vehicles[:, 4]
             standing_reach = 0.5 * self.params.width + STANDING_CLEAR - CORRIDOR + half_w
@@ -478,8 +479,7 @@ class PathDriver(ABC):
         if len(w.pedestrians):
             # a walking pedestrian near the path may step onto it; a standing one stops the
             # ego only inside its swept path (SUMO's pedestrians wait at a kerb for a close car)
-            still = self._ped_speeds < PED_MOVING if len(self._ped_speeds) == len(w.pedestrians) \
-                else np.zeros(len(w.pedestrians), dtype=bool)
+            still = _known(self._ped_speeds, len(w.pedestrians)) < PED_MOVING
             reach = np.where(still, 0.5 * self.params.width + SWEPT_MARGIN - CORRIDOR, 0.5)
             s = self._on_path(path, w.pedestrians, reach)
             s = s[np.isfinite(s) & (s > 0.0)]
@@ -487,8 +487,6 @@ class PathDriver(ABC):
                 stop_s = min(stop_s, float(s.min()) - MIN_GAP)
         # traffic lights, stop signs and yielding at minor links
         for s_line, conn in path.stops:
-            if conn.from_edge == path.first_edge:
-                s_line = min(s_line, path.first_line)
             if self._rank(w, conn) == 1:  # a minor link: arrive slowly enough to give way
                 v = min(v, math.sqrt(MINOR_ENTRY_SPEED ** 2 + 2 * COMFORT_DECEL * max(0.0, s_line)))
             key = f"{conn.from_edge}_{conn.from_lane}>{conn.via}"
@@ -561,8 +559,8 @@ class PathDriver(ABC):
         if len(w.vehicles) == 0:
             return math.inf
         xy, yaw, half = w.vehicles[:, :2], w.vehicles[:, 2], 0.5 * w.vehicles[:, 3]
-        v_f = np.where(np.isfinite(self._speeds), self._speeds, UNSEEN_SPEED) \
-            if len(self._speeds) == len(w.vehicles) else np.full(len(w.vehicles), UNSEEN_SPEED)
+        v_f = _known(self._speeds, len(w.vehicles))
+        v_f = np.where(np.isfinite(v_f), v_f, UNSEEN_SPEED)
         moving = v_f > MOVING
         junction = junction_of(conn.via)
         since = self._queue_wait.get(junction)

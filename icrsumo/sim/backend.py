@@ -105,14 +105,14 @@ def clear_start(ls, x: float, y: float, yaw: float, scenario: Scenario) -> list[
     return gone
 
 
-def remove_background_collisions(ls) -> tuple[str, ...]:
-    """Remove the background vehicles that collided in the last step with another background
+def remove_background_collisions(ls, colls) -> tuple[str, ...]:
+    """Remove the background vehicles that collided in the last step (``colls``, SUMO's
+    collision records of that step) with another background
     vehicle or a pedestrian (never the ego, never a pedestrian). The scenarios keep SUMO's
     ``collision.action warn`` so that the ego's contacts are recorded and it drives on; two
     background cars that touch inside a junction (SUMO's junction model lets foes in now and
     then) would otherwise stand interlocked for good, a wall no driver could pass. SUMO's own
     ``teleport`` action does the same to both parties. Returns the removed ids (sorted)."""
-    colls = ls.simulation.getCollisions()
     if not colls:
         return ()
     gone = set()
@@ -219,6 +219,7 @@ class SumoBackend:
         self._session: SumoSession | None = None
         self.tls_ids: tuple[str, ...] = ()
         self._removed: tuple[str, ...] = ()   # background vehicles removed in the last step
+        self._colls: tuple = ()                # SUMO's collision records of the last step
 
     def __enter__(self) -> SumoBackend:
         return self
@@ -268,6 +269,7 @@ class SumoBackend:
             ls.vehicle.setLaneChangeMode(EGO_ID, 0)
             ls.vehicle.moveToXY(EGO_ID, "", -1, x, y, 90.0 - math.degrees(yaw), 2)
             ls.simulationStep()
+            self._colls = ls.simulation.getCollisions()
             ls.vehicle.subscribe(EGO_ID, [tc.VAR_LANE_ID, tc.VAR_LANEPOSITION])
             ls.vehicle.subscribeContext(EGO_ID, tc.CMD_GET_VEHICLE_VARIABLE, self.context_radius,
                                         [tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_LENGTH, tc.VAR_WIDTH])
@@ -290,7 +292,8 @@ class SumoBackend:
         with _translated():
             ls = self._session.ls
             ls.simulationStep()
-            self._removed = remove_background_collisions(ls)
+            self._colls = ls.simulation.getCollisions()
+            self._removed = remove_background_collisions(ls, self._colls)
 
     def read(self, surroundings: bool = False,
              lights: Callable[[str], Sequence[str]] | None = None) -> SimFrame:
@@ -305,7 +308,7 @@ class SumoBackend:
             if not sub and EGO_ID not in ls.vehicle.getIDList():
                 return SimFrame(t=t, ego_present=False)
             contacts = ()
-            colls = ls.simulation.getCollisions()
+            colls = self._colls
             if colls:
                 persons = set(ls.person.getIDList())
                 found = []

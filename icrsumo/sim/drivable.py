@@ -82,27 +82,9 @@ class DrivableArea:
 
     @classmethod
     def from_net(cls, net: RoadNet) -> DrivableArea:
-        sn = net.sumolib_net
         lanes = lane_polygons(net)
-        car_nodes = set()
-        for eid in net.passenger_lanes:
-            edge = sn.getEdge(eid)
-            car_nodes.update((edge.getFromNode().getID(), edge.getToNode().getID()))
-        junctions = []
-        for nid in sorted(car_nodes):
-            shape = sn.getNode(nid).getShape()
-            if len(shape) >= 3:
-                junctions.append(_polygonal(shapely.make_valid(Polygon([p[:2] for p in shape]))))
-        walking = []
-        for edge in sn.getEdges(withInternal=True):
-            if edge.getFunction() == "walkingarea":
-                for lane in edge.getLanes():
-                    shape = lane.getShape()
-                    if len(shape) >= 3:
-                        walking.append(_polygonal(shapely.make_valid(Polygon([p[:2] for p in shape]))))
-        carriageway = shapely.difference(shapely.union_all(junctions), shapely.union_all(walking))
         joints = joint_polygons(net)
-        return cls(close_and_widen(_polygonal(shapely.union_all([*lanes, *joints, carriageway]))))
+        return cls(close_and_widen(_polygonal(shapely.union_all([*lanes, *joints, carriageway(net)]))))
 
     def contains(self, x: float, y: float) -> bool:
         """Whether the point (x, y) m is drivable (a non-finite point is not)."""
@@ -130,6 +112,29 @@ class DrivableArea:
         """How many of ``points`` ((x, y) m each) are off the drivable area."""
         contains = self.contains
         return sum(1 for x, y in points if not contains(x, y))
+
+
+def carriageway(net: RoadNet):
+    """The junctions' carriageway: every junction outline a car lane meets (netconvert's node
+    shapes), minus the walking areas (shapely polygons, m)."""
+    sn = net.sumolib_net
+    car_nodes = set()
+    for eid in net.passenger_lanes:
+        edge = sn.getEdge(eid)
+        car_nodes.update((edge.getFromNode().getID(), edge.getToNode().getID()))
+    junctions = []
+    for nid in sorted(car_nodes):
+        shape = sn.getNode(nid).getShape()
+        if len(shape) >= 3:
+            junctions.append(_polygonal(shapely.make_valid(Polygon([p[:2] for p in shape]))))
+    walking = []
+    for edge in sn.getEdges(withInternal=True):
+        if edge.getFunction() == "walkingarea":
+            for lane in edge.getLanes():
+                shape = lane.getShape()
+                if len(shape) >= 3:
+                    walking.append(_polygonal(shapely.make_valid(Polygon([p[:2] for p in shape]))))
+    return shapely.difference(shapely.union_all(junctions), shapely.union_all(walking))
 
 
 def close_and_widen(area, closing: float = CLOSING_M, tolerance: float = TOLERANCE_M):

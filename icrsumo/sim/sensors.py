@@ -43,11 +43,10 @@ MOVEMENT_KNOWN_M = 15.0
 
 @dataclass(frozen=True)
 class PendingLight:
-    """A junction entered from ``approach`` lane at (``x``, ``y``) m while the lights of the
-    movements from that lane disagreed: ``red`` / ``not_red``, the edges those movements lead
-    to. The red light is charged once the ego's own movement is known (:meth:`Sensors.detect`)."""
+    """A junction entered at (``x``, ``y``) m while the lights of the movements from the
+    approach lane disagreed: ``red`` / ``not_red``, the edges those movements lead to. Light
+    ``tls``'s red is charged once the ego's own movement is known (:meth:`Sensors.detect`)."""
 
-    approach: str
     x: float
     y: float
     tls: str
@@ -192,7 +191,7 @@ class Sensors:
                 if red and not rest:
                     ev.append(Event(EventKind.RED_LIGHT, t, pos, entered.tls, ego.x, ego.y))
                 elif red:   # the movements from this lane disagree: wait to see which one it is
-                    pending = PendingLight(prev, ego.x, ego.y, entered.tls, frozenset(red), frozenset(rest))
+                    pending = PendingLight(ego.x, ego.y, entered.tls, frozenset(red), frozenset(rest))
             elif entered is not None and entered.state in ("s", "w") and prev not in stopped:
                 ev.append(Event(EventKind.STOP_SIGN, t, pos, net.edge_to_node.get(edge, ""), ego.x, ego.y))
         if pending is not None and lane:

@@ -11,6 +11,7 @@ import pytest
 from icrsumo.networks import load_net
 from icrsumo.resources import bundled_towns
 from icrsumo.routes import format_routes
+from icrsumo.sim.callbacks import EpisodeCallback
 from icrsumo.types import RouteSpec, Waypoint
 
 
@@ -117,8 +118,6 @@ def test_fleet_cap_holds_background_traffic_and_never_the_ego(tmp_path):
     with moveToXY, which inserts it even when the cap is reached."""
     import re
 
-    from icrsumo.sim.callbacks import EpisodeCallback
-
     class Count(EpisodeCallback):
         most = 0
 
@@ -155,7 +154,7 @@ def test_sumo_never_teleports_the_ego_out_of_a_queue(tmp_path):
     assert log.termination == "completed"
 
 
-class _OncomingAtGreen:
+class _OncomingAtGreen(EpisodeCallback):
     """Class D set-up on Town01's junction 54, where the left turn ``-1`` -> ``-25`` gets a
     permissive ``g`` in the same phase as the oncoming straight ``2`` -> ``1`` gets ``G``: the
     light is held red while the ego arrives, and an oncoming car stands at its line (its
@@ -163,35 +162,28 @@ class _OncomingAtGreen:
     Records the order in which the two pass the point where their paths cross."""
 
     def __init__(self, release: float | None) -> None:
-        from icrsumo.sim.callbacks import EpisodeCallback
-
-        outer = self
         self.release = release
         self.order: list[tuple[str, float]] = []
+        self.green: float | None = None
 
-        class _Cb(EpisodeCallback):
-            def on_ready(self, episode):
-                ls = episode.backend.session.ls
-                ls.trafficlight.setPhase("54", 8)          # red for both movements
-                ls.trafficlight.setPhaseDuration("54", 25.0)
-                ls.route.add("oncoming", ["2", "1"])
-                ls.vehicle.add("foe", "oncoming", departPos="38", departSpeed="0", departLane="1")
-                outer.green = None
+    def on_ready(self, episode):
+        ls = episode.backend.session.ls
+        ls.trafficlight.setPhase("54", 8)          # red for both movements
+        ls.trafficlight.setPhaseDuration("54", 25.0)
+        ls.route.add("oncoming", ["2", "1"])
+        ls.vehicle.add("foe", "oncoming", departPos="38", departSpeed="0", departLane="1")
 
-            def on_step(self, episode, step):
-                ls = episode.backend.session.ls
-                if "foe" not in ls.vehicle.getIDList():
-                    return
-                if ls.trafficlight.getRedYellowGreenState("54")[5] == "G" and outer.green is None:
-                    outer.green = step.t
-                go = outer.green is not None and outer.release is not None and \
-                    step.t - outer.green >= outer.release
-                ls.vehicle.setSpeed("foe", -1 if go else 0)
-                for who, past in (("ego", (":54_6_0", "-25_1")), ("foe", ("1_1",))):
-                    if who not in {o for o, _ in outer.order} and ls.vehicle.getLaneID(who) in past:
-                        outer.order.append((who, step.t))
-
-        self.callback = _Cb()
+    def on_step(self, episode, step):
+        ls = episode.backend.session.ls
+        if "foe" not in ls.vehicle.getIDList():
+            return
+        if ls.trafficlight.getRedYellowGreenState("54")[5] == "G" and self.green is None:
+            self.green = step.t
+        go = self.green is not None and self.release is not None and step.t - self.green >= self.release
+        ls.vehicle.setSpeed("foe", -1 if go else 0)
+        for who, past in (("ego", (":54_6_0", "-25_1")), ("foe", ("1_1",))):
+            if who not in {o for o, _ in self.order} and ls.vehicle.getLaneID(who) in past:
+                self.order.append((who, step.t))
 
 
 @pytest.mark.sumo
@@ -203,7 +195,7 @@ def test_permissive_left_waits_for_an_oncoming_car_that_stands_at_the_start_of_g
     it (a near miss 3.3 m apart); now it lets the car pass and follows it by more than 2 s."""
     setup = _OncomingAtGreen(release)
     _, log, result = drive(tmp_path, route_through("Town01", ["-1", "-25", "-10"], lane=1),
-                           traffic="none", callbacks=[setup.callback])
+                           traffic="none", callbacks=[setup])
     assert log.termination == "completed" and result.ds == 100.0
     (first, t_first), (second, t_second) = setup.order
     assert (first, second) == ("foe", "ego") and t_second - t_first > 2.0
@@ -217,7 +209,7 @@ def test_permissive_left_waits_for_a_standing_queue_head_only_so_long(tmp_path):
 
     setup = _OncomingAtGreen(None)
     _, log, result = drive(tmp_path, route_through("Town01", ["-1", "-25", "-10"], lane=1),
-                           traffic="none", callbacks=[setup.callback])
+                           traffic="none", callbacks=[setup])
     assert log.termination == "completed" and result.ds == 100.0
     assert [o for o, _ in setup.order] == ["ego"]
     assert setup.order[0][1] - setup.green < STANDING_WAIT + 6.0
@@ -230,8 +222,6 @@ def test_red_light_is_judged_on_the_movement_the_ego_makes(tmp_path):
     loops round and comes back to turn right on that phase; at the turn SUMO reports the ego
     on the straight-on movement's internal lane for its first metres. Judged by that lane the
     ego ran a red light (DS 49.0 before the fix); judged by the movement it makes, none."""
-    from icrsumo.sim.callbacks import EpisodeCallback
-
     edges = ["-0", "-1", "-16", "12", "-3", "15", "14", "-10", "-11", "7", "18", "-2", "-0", "-4", "8"]
 
     class Lights(EpisodeCallback):
@@ -259,25 +249,22 @@ def test_red_light_is_judged_on_the_movement_the_ego_makes(tmp_path):
     assert [e.kind for e in log.events] == [] and result.ds == 100.0
 
 
-class _StandingPedestrian:
+class _StandingPedestrian(EpisodeCallback):
     """A pedestrian held standing at (``x``, ``y``) m for the whole episode (SUMO's person
-    moved there at every step)."""
+    moved there at every step); ``lane``: where SUMO has it."""
 
     def __init__(self, x: float, y: float) -> None:
-        from icrsumo.sim.callbacks import EpisodeCallback
+        self.x, self.y, self.lane = x, y, ""
 
-        class _Cb(EpisodeCallback):
-            def on_ready(self, episode):
-                ls = episode.backend.session.ls
-                ls.person.add("ped", "-25", 1.0)
-                ls.person.appendWaitingStage("ped", 3600.0)
+    def on_ready(self, episode):
+        ls = episode.backend.session.ls
+        ls.person.add("ped", "-25", 1.0)
+        ls.person.appendWaitingStage("ped", 3600.0)
 
-            def on_step(self, episode, step):
-                ls = episode.backend.session.ls
-                ls.person.moveToXY("ped", "", x, y, keepRoute=2)
-                self.lane = ls.person.getLaneID("ped")
-
-        self.callback = _Cb()
+    def on_step(self, episode, step):
+        ls = episode.backend.session.ls
+        ls.person.moveToXY("ped", "", self.x, self.y, keepRoute=2)
+        self.lane = ls.person.getLaneID("ped")
 
 
 @pytest.mark.sumo
@@ -293,8 +280,8 @@ def test_a_pedestrian_standing_on_the_kerb_does_not_stop_the_ego(tmp_path, x, wh
     pedestrian now counts only inside the swept path (half the ego's width + 0.5 m)."""
     ped = _StandingPedestrian(x, 320.6)
     _, log, result = drive(tmp_path, route_through("Town01", ["-1", "-25", "-10"], lane=1),
-                           traffic="none", callbacks=[ped.callback])
-    assert ped.callback.lane == where
+                           traffic="none", callbacks=[ped])
+    assert ped.lane == where
     assert (log.termination == "completed") is passes
     if not passes:
         assert log.termination == "agent_blocked"
@@ -313,16 +300,9 @@ def _outlines_only(net):
     no joints, no closing, no tolerance."""
     import shapely
 
-    from icrsumo.sim.drivable import DrivableArea, _polygonal, lane_polygons
+    from icrsumo.sim.drivable import DrivableArea, _polygonal, carriageway, lane_polygons
 
-    sn = net.sumolib_net
-    junctions = [_polygonal(shapely.make_valid(shapely.Polygon([p[:2] for p in n.getShape()])))
-                 for n in sn.getNodes() if len(n.getShape()) >= 3]
-    walking = [_polygonal(shapely.make_valid(shapely.Polygon([p[:2] for p in lane.getShape()])))
-               for e in sn.getEdges(withInternal=True) if e.getFunction() == "walkingarea"
-               for lane in e.getLanes() if len(lane.getShape()) >= 3]
-    return DrivableArea(_polygonal(shapely.union_all(
-        [*lane_polygons(net), shapely.difference(shapely.union_all(junctions), shapely.union_all(walking))])))
+    return DrivableArea(_polygonal(shapely.union_all([*lane_polygons(net), carriageway(net)])))
 
 
 def test_a_sliver_between_lane_outlines_is_drivable():
