@@ -337,7 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "a route XML file or a convert-routes folder")
     v.add_argument("--agent", action="append",
                    help="built-in name, module:Class, path/file.py:Class or remote:http://HOST:PORT "
-                   "(repeatable; default bev-token)")
+                   "(repeatable; default bev-ngram-aug)")
     v.add_argument("--family", action="append",
                    help="paraphrase, ambiguity, noise, misleading, and the controls blank, shuffled "
                    "(repeatable; default the four)")
@@ -382,7 +382,7 @@ def build_parser() -> argparse.ArgumentParser:
         "like any other; writes OUT/attack.json and OUT/attack.md, with a transfer table between agents.",
     )
     at.add_argument("--suite", default="tiny", help="as for evaluate (default tiny)")
-    at.add_argument("--agent", action="append", help="as for evaluate (repeatable; default bev-token)")
+    at.add_argument("--agent", action="append", help="as for evaluate (repeatable; default bev-ngram-aug)")
     at.add_argument("--routes", action="append", help="only these route ids (comma separated)")
     at.add_argument("--seed", type=int, default=2026, help="seed of the search and the suite (default 2026)")
     at.add_argument("--budget", type=int, default=32,
