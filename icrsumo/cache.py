@@ -17,6 +17,7 @@ from pathlib import Path
 from .convert import CONVERTER_VERSION, ConvertOptions, convert_routes, safe_name
 from .errors import InputError
 from .fsio import write_atomic
+from .instructions.baseline import LAYOUT_VERSION
 from .instructions.generate import GenerateOptions, generate
 from .resources import bundled_suites, suite_coords
 from .routes import format_routes, read_routes
@@ -42,9 +43,9 @@ def bundled_route(route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUITE,
     suites = bundled_suites()
     if suite not in suites:
         raise InputError("suite", suite, "not a bundled route split", f"use one of {', '.join(suites)}")
-    # the converter's version in the path: a route converted by an earlier icrsumo (other traffic)
-    # is never reused
-    root = cache_root() / f"{suite}-{traffic}-c{CONVERTER_VERSION}" / safe_name(route)
+    # the converter's and the instruction layout's versions in the path: a route converted or
+    # instructed by an earlier icrsumo (other traffic, other triggers) is never reused
+    root = cache_root() / f"{suite}-{traffic}-c{CONVERTER_VERSION}-l{LAYOUT_VERSION}" / safe_name(route)
     sc_dir = root / "scenarios" / safe_name(route)
     instr = root / "instructions" / f"{safe_name(route)}.json"
     if (sc_dir / "scenario.json").is_file() and instr.is_file():

@@ -260,12 +260,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "convert-routes", help="leaderboard route XML -> runnable SUMO scenarios",
         description="Convert a leaderboard-style route file (or a bundled suite: tiny, short, "
-        "long, train, langauto-tiny, langauto-short, langauto-long, carla-train, carla-focus) into "
+        "long, train, langauto-tiny, langauto-short, langauto-long, carla-train, carla-focus, "
+        "carla-fidelity) into "
         "SUMO scenarios with background traffic.",
     )
     p.add_argument("routes", help="route XML file, or the name of a bundled suite (tiny, short, long, "
                                   "train, langauto-tiny, langauto-short, langauto-long, carla-train, "
-                                  "carla-focus)")
+                                  "carla-focus, carla-fidelity)")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--net", type=Path, help="use this .net.xml for every route")
     p.add_argument("--xodr", type=Path, help="convert this OpenDRIVE file (cached) for every route")

@@ -17,6 +17,7 @@ how they choose the next edge at a junction:
 from __future__ import annotations
 
 import math
+import re
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 
@@ -663,6 +664,10 @@ class RouteOracle(PathDriver):
         return edges[i + 1] if i is not None and i + 1 < len(edges) else None
 
 
+#: words that name a roundabout in an instruction
+_RING_WORDS = re.compile(r"roundabout|traffic circle|rotary|\bcircle\b", re.IGNORECASE)
+
+
 class InstructionFollower(PathDriver):
     """Knows the map, not the route: takes the branch the active instruction names."""
 
@@ -673,42 +678,64 @@ class InstructionFollower(PathDriver):
         self.intent = Intent.FOLLOW
         self._instr_id = -1
         self._lane_done: set[int] = set()
-        self._lane_at_instr: int | None = None
+        # the lane (edge, index) the active lane-change instruction asks for, and the one an
+        # earlier unfinished lane-change instruction asked for (consecutive instructions add up)
+        self._lane_goal: tuple[str, int] | None = None
+        self._lane_carry: tuple[str, int] | None = None
+        # the active instruction names a roundabout: at its entry the ring is taken, not a bypass
+        self._ring_named = False
         self._ring_exits = 0
         self._ring_edge = ""
+        # the edge at whose end the active instruction's maneuver was committed to: an
+        # instruction names one junction, so the junctions after it are driven by the road
+        self._spent: str | None = None
 
     def reset(self, info: EpisodeInfo) -> None:
         super().reset(info)
         self.intent = Intent.FOLLOW
         self._instr_id = -1
         self._lane_done = set()
-        self._lane_at_instr = None
+        self._lane_goal = self._lane_carry = None
+        self._ring_named = False
         self._ring_exits = 0
         self._ring_edge = ""
+        self._spent = None
 
     def observe(self, obs: Observation) -> None:
         if obs.instruction_id != self._instr_id:
+            unfinished = self._lane_goal is not None and self._instr_id not in self._lane_done
+            self._lane_carry = self._lane_goal if unfinished else None
+            self._lane_goal = None
             self._instr_id = obs.instruction_id
             self.intent = classify_intent(obs.instruction) if obs.instruction else Intent.FOLLOW
-            self._lane_at_instr = None
-            # a new instruction before the junction is entered may name another branch: the
-            # branch is chosen again (a route that starts a few metres before a junction meets
-            # its turn instruction after the choice was made)
+            self._ring_named = bool(_RING_WORDS.search(obs.instruction or ""))
+            self._spent = None
+            # a new instruction before a junction is entered may name another branch there:
+            # the branch is chosen again (a route that starts a few metres before a junction
+            # meets its turn instruction after the choice was made; inside a long junction the
+            # ego has already chosen at the short edge beyond it)
             lane = obs.world.lane if obs.world is not None else ""
-            if lane and not lane.startswith(":"):
+            if lane.startswith(":"):
+                self._decided.pop(self.net.via_edges.get(lane, ("", ""))[1], None)
+            elif lane:
                 self._decided.pop(_lane_edge(lane), None)
 
     def preferred_lane(self, w: World, edge: str, lanes: tuple[int, ...], current: int) -> int:
         if self.intent in (Intent.LANE_LEFT, Intent.LANE_RIGHT) and self._instr_id not in self._lane_done:
-            if self._lane_at_instr is None:
-                self._lane_at_instr = current
-            elif current != self._lane_at_instr:
-                self._lane_done.add(self._instr_id)
-                return super().preferred_lane(w, edge, lanes, current)
             step = 1 if self.intent == Intent.LANE_LEFT else -1
-            if current + step in lanes:
-                return current + step
-            if current + step in self.net.passenger_lanes.get(edge, ()):
+            if self._lane_goal is None or self._lane_goal[0] != edge:
+                # one lane from where the ego is, or from where an unfinished change of the
+                # same side on this edge was going
+                carry = self._lane_carry
+                base = carry[1] if carry is not None and carry[0] == edge and \
+                    (carry[1] - current) * step > 0 else current
+                self._lane_goal, self._lane_carry = (edge, base + step), None
+            goal = self._lane_goal[1]
+            if goal == current:
+                self._lane_done.add(self._instr_id)
+            elif goal in lanes:
+                return goal
+            elif goal in self.net.passenger_lanes.get(edge, ()):
                 return current  # the lane exists but does not lead on: stay
         return super().preferred_lane(w, edge, lanes, current)
 
@@ -716,7 +743,48 @@ class InstructionFollower(PathDriver):
         net = self.net
         if len(options) == 1:
             return options[0]
+        # a junction maneuver already committed to: the instruction is used up beyond it
+        intent = self.intent if self._spent in (None, edge) else Intent.FOLLOW
         ring = net.roundabout_edges
+        if self._ring_named and edge not in ring:
+            # "take the n-th exit of the roundabout": the ring, not a slip road past it
+            into = [o for o in options if o in ring]
+            if into:
+                return into[0]
+        if edge in ring:
+            if edge != self._ring_edge:
+                self._ring_edge = edge
+            target = {Intent.RIGHT: 1, Intent.STRAIGHT: 2, Intent.LEFT: 3}.get(intent, 2)
+            exits = [o for o in options if o not in ring]
+            on_ring = [o for o in options if o in ring]
+            if exits and (self._ring_exits + 1 >= target or not on_ring):
+                if not tentative:
+                    self._ring_exits = 0
+                    self._spent = edge
+                return exits[0]
+            if exits and not tentative:
+                self._ring_exits += 1
+            return on_ring[0] if on_ring else options[0]
+        dirs = {o: {c.direction for c in net.connections[(edge, o)]} for o in options}
+        want = {Intent.LEFT: ("l", "L"), Intent.RIGHT: ("r", "R"), Intent.STRAIGHT: ("s",)}.get(intent)
+        if want:
+            for d in want:
+                for o in options:
+                    if d in dirs[o]:
+                        if not tentative and not any(n in ring for n in (o, *options)):
+                            self._spent = edge
+                        return o
+        for d in ("s", "L", "R", "r", "l"):
+            for o in options:
+                if d in dirs[o]:
+                    return o
+        return options[0]
+        ring = net.roundabout_edges
+        if self._ring_named and edge not in ring:
+            # "take the n-th exit of the roundabout": the ring, not a slip road past it
+            into = [o for o in options if o in ring]
+            if into:
+                return into[0]
         if edge in ring:
             if edge != self._ring_edge:
                 self._ring_edge = edge

@@ -8,14 +8,19 @@ Layout along the route (positions in m):
   (150 m for highway exits) and a near one qualified by the junction kind
   (``turn_traffic_light``, ``turn_t_junction``, ``roundabout_exit``, ...) 20 m before;
   otherwise one instruction 50 m before (or as soon as the previous maneuver is done);
-- lane changes at the start of the edge where the route needs them, with the distance left to
+- lane changes at the start of the edge where the route needs them (earlier where that edge is
+  too short to change on: :func:`.maneuvers.lane_change_pos`), with the distance left to
   the junction where the lane matters when that is 30 m or more, kept on for 30 m per lane to
   cross (at most half the room before that junction);
 - follow instructions over gaps of 30 m or more between maneuvers and after the last one;
 - no instruction replaces a junction maneuver's before the ego has left that junction (its
   internal lanes' end plus 5 m; for a roundabout, the exit junction's), unless the next
   junction comes sooner: then the next instruction starts at the exit, or 5 m before the next
-  junction, whichever is later;
+  junction, whichever is later; where the next junction is less than 20 m past the exit (CARLA's
+  towns have junctions a few metres apart), the driver must know it while still in the last
+  junction: its instruction starts 20 m before it, but not before the ego has entered the last
+  junction (1 m past its entry; for a roundabout, 20 m before its exit);
+- a lane change across n lanes is n instructions, one per lane, spread over 30 m per lane;
 - notices beside the instructions: traffic lights and stop signs 40 m before the junction,
   pedestrians at signalised or stop-controlled junctions with crossings.
 
@@ -39,6 +44,9 @@ from .banks import ORDINALS, Banks, fill
 if TYPE_CHECKING:
     from .baseline_bank import BaselineBank
 
+#: version of the layout rules above, stored with generated instructions (1: before lane changes
+#: were moved off short edges, split per lane and junctions a few metres apart announced early)
+LAYOUT_VERSION = 2
 FAR_M, NEAR_M, SINGLE_M = 80.0, 20.0, 50.0
 TWO_STAGE_ROOM_M = 35.0
 FOLLOW_GAP_M = 30.0
@@ -46,6 +54,8 @@ AFTER_M = 10.0
 #: distance (m) past a junction's exit before the next instruction replaces its maneuver's
 AFTER_EXIT_M = 5.0
 NOTICE_M = 40.0
+#: a junction closer than this (m) to the last maneuver's exit is announced inside that junction
+NEXT_ROOM_M = 20.0
 #: distance (m) a lane change instruction stays on before the next one, per lane to cross
 LANE_CHANGE_M = 30.0
 HIGHWAY_EXIT_FAR_M = 150.0
@@ -145,20 +155,30 @@ def build_baseline(
             b.add(base, at, Intent.FOLLOW)
 
     exit_pos = 0.0  # where the last junction maneuver's junction was left (m)
+    inside: float | None = None  # a route position (m) inside that junction
     for m in maneuvers:
         if m.kind.startswith("lane_change"):
             side = "left" if m.intent == Intent.LANE_LEFT else "right"
             deadline = next((t.pos for t in turns if t.pos > m.pos), length)
-            room = deadline - max(cursor, m.pos)
-            if room >= 30.0 and rng.random() < 0.5:
-                b.add("lane_change_distance", max(cursor, m.pos), m.intent, m, distance=room, side=side)
-            else:
-                b.add("lane_change", max(cursor, m.pos), m.intent, m, side=side)
+            start = max(cursor, m.pos)
+            room = deadline - start
             # leave the lane change on screen for a while (30 m per lane to cross) before the
-            # next announcement
-            cursor = max(cursor, m.pos) + min(LANE_CHANGE_M * max(m.lanes, 1), max(1.0, 0.5 * room))
+            # next announcement; one instruction per lane, as the phrasings name one lane
+            n = max(m.lanes, 1)
+            span = min(LANE_CHANGE_M * n, max(1.0, 0.5 * room))
+            if room >= 30.0 and rng.random() < 0.5:
+                b.add("lane_change_distance", start, m.intent, m, distance=room, side=side)
+            else:
+                b.add("lane_change", start, m.intent, m, side=side)
+            for i in range(1, n):
+                b.add("lane_change", start + span * i / n, m.intent, m, side=side)
+            cursor = start + span
             continue
-        if m.pos < cursor:
+        if inside is not None and m.pos - exit_pos < NEXT_ROOM_M:
+            # the junction follows the last one so closely that the driver must know it while
+            # still in the last one: announce it there, NEXT_ROOM_M before it at the latest
+            cursor = max(inside, min(cursor, m.pos - NEXT_ROOM_M))
+        elif m.pos < cursor:
             # the junction comes soon after the last maneuver: announce it as soon as the
             # last junction is left, at the latest 5 m before this one
             cursor = max(exit_pos, min(cursor, m.pos - AFTER_EXIT_M))
@@ -176,6 +196,8 @@ def build_baseline(
             itype, slots = _near_type(m)
             b.add(itype, announce, m.intent, m, **slots)
         exit_pos = max(m.pos, m.end)
+        # in a roundabout, the exit junction (the ring's exit count must hold until then)
+        inside = m.pos + 1.0 if m.kind != "roundabout" else max(m.pos + 1.0, exit_pos - NEXT_ROOM_M)
         cursor = max(m.pos + AFTER_M, m.end + AFTER_EXIT_M)
     if length - cursor >= FOLLOW_GAP_M or not b.items:
         follow(min(cursor, length), length)

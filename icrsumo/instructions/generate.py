@@ -29,7 +29,7 @@ from ..scenario import Scenario, check_against_net, find_scenarios, read_scenari
 from ..types import InstructionSet, Maneuver
 from ..vocab import CONTROL_FAMILIES
 from .banks import Banks, load_banks
-from .baseline import build_baseline
+from .baseline import LAYOUT_VERSION, build_baseline
 from .baseline_bank import BaselineBank, load_baseline_bank
 from .families import ALL_FAMILIES, FAMILIES, make_variants
 from .maneuvers import extract_maneuvers, is_highway
@@ -119,7 +119,7 @@ def generate_route(scenario_dir: Path, opts: GenerateOptions) -> tuple[str, dict
                               else llm_variants(baseline, fam, opts.k, opts.seed, opts.llm))]
         generator = f"llm:{opts.llm.model}"
     meta = {"seed": opts.seed, "k": opts.k, "families": list(opts.families),
-            "generator": generator, "banks_sha256": banks.sha256,
+            "generator": generator, "layout": LAYOUT_VERSION, "banks_sha256": banks.sha256,
             **({"baseline_bank_sha256": user.sha256} if user is not None else {}),
             "scenario_hash": sc.manifest.get("source_hash", "")}
     return sc.route_id, route_document(baseline, variants, maneuvers, meta)

@@ -13,6 +13,10 @@ from ..types import Intent, Maneuver
 
 #: an edge with a speed limit at or above this (m/s, 90 km/h) is highway
 HIGHWAY_SPEED = 25.0
+#: room (m) a lane change needs per lane crossed before the junction where the lane matters
+LANE_CHANGE_ROOM_M = 30.0
+#: room (m) left after a lane change moved back for the following junction's announcement
+ANNOUNCE_ROOM_M = 50.0
 
 _TURN = {"s": ("straight", Intent.STRAIGHT), "l": ("turn_left", Intent.LEFT),
          "L": ("turn_left", Intent.LEFT), "r": ("turn_right", Intent.RIGHT),
@@ -54,6 +58,20 @@ def junction_exit(net: RoadNet, j: dict) -> float:
     return round(float(j["pos"]) + via, 2)
 
 
+def lane_change_pos(pos: float, lanes: int, junctions: list[dict], turns: list[Maneuver]) -> float:
+    """Route position (m) where a lane change across ``lanes`` lanes is asked for. The route
+    builder puts it at the start of the edge whose exit needs the other lane; where that edge
+    is too short to change on (under ``LANE_CHANGE_ROOM_M`` per lane before its junction, e.g. a
+    few metres between two junctions of a CARLA town), the change is asked for earlier, with
+    room for it and for the turn's announcement after it, but not before the previous junction
+    maneuver's exit."""
+    ahead = next((float(j["pos"]) for j in junctions if float(j["pos"]) >= pos), None)
+    if ahead is None or ahead - pos >= LANE_CHANGE_ROOM_M * lanes:
+        return pos
+    floor = max((float(m.end) for m in turns if m.end <= pos + 1e-6), default=0.0)
+    return round(max(floor, min(pos, ahead - LANE_CHANGE_ROOM_M * lanes - ANNOUNCE_ROOM_M)), 2)
+
+
 def extract_maneuvers(scenario: Scenario, net: RoadNet) -> list[Maneuver]:
     """Junction maneuvers (where the route has a choice, or enters / leaves a highway) and the
     lane changes it requires, sorted by route position. Follow stretches are the gaps between
@@ -92,10 +110,12 @@ def extract_maneuvers(scenario: Scenario, net: RoadNet) -> list[Maneuver]:
             out.append(Maneuver(kind, j["pos"], intent, junction_kind(net, j["junction"]),
                                 j["junction"], end=junction_exit(net, j)))
         i += 1
+    turns = list(out)
     for c in scenario.manifest["lane_changes"]:
         left = c["to_lane"] > c["from_lane"]
-        out.append(Maneuver("lane_change_left" if left else "lane_change_right", c["pos"],
-                            Intent.LANE_LEFT if left else Intent.LANE_RIGHT,
-                            lanes=abs(int(c["to_lane"]) - int(c["from_lane"]))))
+        lanes = abs(int(c["to_lane"]) - int(c["from_lane"]))
+        out.append(Maneuver("lane_change_left" if left else "lane_change_right",
+                            lane_change_pos(float(c["pos"]), lanes, junctions, turns),
+                            Intent.LANE_LEFT if left else Intent.LANE_RIGHT, lanes=lanes))
     out.sort(key=lambda m: (m.pos, m.kind))
     return out

@@ -5,9 +5,9 @@ from __future__ import annotations
 from collections import Counter
 
 from icrsumo.instructions.banks import load_banks
-from icrsumo.instructions.baseline import build_baseline
+from icrsumo.instructions.baseline import NEXT_ROOM_M, build_baseline
 from icrsumo.instructions.intent import classify_intent
-from icrsumo.instructions.maneuvers import extract_maneuvers, roundabout_intent
+from icrsumo.instructions.maneuvers import extract_maneuvers, lane_change_pos, roundabout_intent
 from icrsumo.instructions.store import read_instruction_sets
 from icrsumo.networks import load_net
 from icrsumo.scenario import find_scenarios, read_scenario
@@ -94,17 +94,22 @@ def test_junction_maneuvers_end_where_the_junction_is_left(converted):
 def test_no_instruction_replaces_a_maneuver_inside_its_junction(converted):
     """While the ego is inside a junction maneuver's junction (entry to exit), the active
     instruction is that maneuver's, unless the next junction starts before this one's exit
-    plus 5 m (then the next one's comes at the exit at the earliest)."""
+    plus 5 m (then the next one's comes at the exit at the earliest), or less than NEXT_ROOM_M
+    past the exit (then it comes NEXT_ROOM_M before the next junction, never before the ego has
+    entered this one; a roundabout keeps its instruction until NEXT_ROOM_M before its exit)."""
     banks = load_banks()
     for _, sc, ms in _all(converted):
         ins = build_baseline(sc.route_id, sc.length, ms, banks, sc.seed).instructions
         junction = [m for m in ms if not m.kind.startswith("lane_change")]
         for a, b in zip(junction, junction[1:] + [None]):
+            inside = a.pos + 1.0 if a.kind != "roundabout" else max(a.pos + 1.0, a.end - NEXT_ROOM_M)
             for i in ins:
                 if a.pos < i.trigger < a.end + 4.99:
                     assert i.maneuver_pos == round(a.pos, 2) or (
-                        b is not None and b.pos < a.end + 5.0 and i.trigger >= a.end
-                        and i.maneuver_pos == round(b.pos, 2)), (sc.route_id, a, i)
+                        b is not None and i.maneuver_pos == round(b.pos, 2) and (
+                            (b.pos < a.end + 5.0 and i.trigger >= a.end)
+                            or (b.pos < a.end + NEXT_ROOM_M and i.trigger >= inside - 1e-6
+                                and i.trigger >= b.pos - NEXT_ROOM_M - 1e-6))), (sc.route_id, a, i)
 
 
 def _sequence(maneuvers: list[Maneuver], length: float = 600.0):
@@ -117,12 +122,21 @@ def test_a_wide_junction_keeps_its_instruction_until_it_is_left():
     ins = _sequence([left, right])
     after = [i for i in ins if i.trigger > 100.0]
     assert after[0].trigger == 145.0 and after[0].intent == Intent.FOLLOW
-    # a junction right behind the wide one is announced at its exit, before its own entry
+    # a junction a few metres behind the wide one is announced inside it, 20 m before its
+    # own entry: a driver must know the branch before the short edge between them
     close = Maneuver("turn_right", 143.0, Intent.RIGHT, "crossroad", "j2", end=160.0)
     ins = _sequence([left, close])
     nxt = next(i for i in ins if i.maneuver_pos == 143.0)
-    assert nxt.trigger == 140.0 and nxt.intent == Intent.RIGHT
-    assert all(i.maneuver_pos == 100.0 for i in ins if 100.0 < i.trigger < 140.0)
+    assert nxt.trigger == 123.0 and nxt.intent == Intent.RIGHT
+    assert all(i.maneuver_pos == 100.0 for i in ins if 100.0 < i.trigger < 123.0)
+    # ... but never before the ego is in the last junction (1 m past its entry)
+    short = Maneuver("turn_left", 100.0, Intent.LEFT, "traffic_light", "j1", end=110.0)
+    ins = _sequence([short, Maneuver("straight", 115.0, Intent.STRAIGHT, "crossroad", "j2", end=130.0)])
+    assert next(i for i in ins if i.maneuver_pos == 115.0).trigger == 101.0
+    # 20 m or more past the exit: announced once the last junction is left, as before
+    far = Maneuver("turn_right", 170.0, Intent.RIGHT, "crossroad", "j2", end=185.0)
+    ins = _sequence([left, far])
+    assert next(i for i in ins if i.maneuver_pos == 170.0).trigger == 145.0
 
 
 def test_a_lane_change_stays_on_30_m_per_lane_to_cross():
@@ -131,12 +145,28 @@ def test_a_lane_change_stays_on_30_m_per_lane_to_cross():
         change = Maneuver("lane_change_right", 100.0, Intent.LANE_RIGHT, lanes=lanes)
         ins = _sequence([change, turn])
         i = next(k for k, x in enumerate(ins) if x.intent == Intent.LANE_RIGHT)
-        assert ins[i].trigger == 100.0 and ins[i + 1].trigger == 100.0 + on_for
+        # one instruction per lane (the phrasings name one lane), 30 m apart
+        assert [x.trigger for x in ins[i:i + lanes]] == [100.0 + 30.0 * k for k in range(lanes)]
+        assert all(x.intent == Intent.LANE_RIGHT for x in ins[i:i + lanes])
+        assert ins[i + lanes].trigger == 100.0 + on_for and ins[i + lanes].intent != Intent.LANE_RIGHT
     # never longer than half the room before the junction where the lane matters
     change = Maneuver("lane_change_right", 300.0, Intent.LANE_RIGHT, lanes=3)
     ins = _sequence([change, turn])
     i = next(k for k, x in enumerate(ins) if x.intent == Intent.LANE_RIGHT)
-    assert ins[i + 1].trigger == 350.0
+    assert [x.trigger for x in ins[i:i + 4]] == [300.0, 316.67, 333.33, 350.0]
+
+
+def test_a_lane_change_on_a_short_edge_is_asked_for_where_it_fits():
+    """A lane change the route builder puts on an edge a few metres long (between two junctions
+    of a CARLA town) comes back to where it fits, leaving room for the turn's announcement, but
+    not before the previous junction maneuver's exit."""
+    turns = [Maneuver("turn_right", 100.0, Intent.RIGHT, "traffic_light", "j0", end=120.0)]
+    junctions = [{"pos": 100.0}, {"pos": 150.0}, {"pos": 240.0}]
+    # 4 m before the junction: one lane needs 30 m, plus 50 m for the turn's announcement
+    assert lane_change_pos(236.0, 1, junctions, turns) == 160.0
+    assert lane_change_pos(236.0, 2, junctions, turns) == 130.0
+    assert lane_change_pos(236.0, 4, junctions, turns) == 120.0   # the last exit at the earliest
+    assert lane_change_pos(180.0, 1, junctions, turns) == 180.0   # 60 m of room: where it was
 
 
 def test_lane_changes_count_the_lanes_they_cross(converted):
