@@ -51,20 +51,26 @@ SCORED_BY = {"lb1": "CARLA Leaderboard 1.0's rules", "lb2": "CARLA Leaderboard 2
 
 #: collect folder name -> what it holds (the command that wrote it and its routes)
 DATA = {
-    "DATA_TRAIN": "`icrsumo collect --out DATA_TRAIN` (the bundled `train` split: 272 routes on icrsumo's "
-                  "six towns that share no edge sequence with the evaluation splits; 816 episodes, "
-                  "269,762 frames)",
-    "DATA_CARLA": "`icrsumo collect --suite carla-train --out DATA_CARLA` (128 random routes on CARLA's "
-                  "eight towns, none of which drives a whole LangAuto route; 384 episodes, 193,567 frames)",
-    "DATA_FOCUS": "`icrsumo collect --suite carla-focus --out DATA_FOCUS` (92 routes on CARLA's towns, "
-                  "each with a lane change across two lanes or more or a roundabout; none drives a whole "
-                  "LangAuto route; 276 episodes, 117,553 frames)",
+    "train": "`icrsumo collect --out train` (the bundled `train` split: 272 routes on icrsumo's six "
+             "towns that share no edge sequence with the evaluation splits; 816 episodes, 278,002 frames)",
+    "carla-train": "`icrsumo collect --suite carla-train --out carla-train` (128 random routes on CARLA's "
+                   "eight towns, none of which drives a whole LangAuto route; 384 episodes, 201,148 frames)",
+    "carla-focus": "`icrsumo collect --suite carla-focus --out carla-focus` (92 routes on CARLA's towns, "
+                   "each with a lane change across two lanes or more or a roundabout; none drives a whole "
+                   "LangAuto route; 276 episodes, 116,358 frames)",
+    "dagger-carla-train": "`icrsumo collect --suite carla-train --driver bev-ngram-aug --out "
+                          "dagger-carla-train` (a DAgger round: the first checkpoint of `bev-ngram-aug` "
+                          "trained on the three folders above drives, the expert labels; 384 episodes, "
+                          "197,331 frames)",
+    "dagger-carla-focus": "`icrsumo collect --suite carla-focus --driver bev-ngram-aug --out "
+                          "dagger-carla-focus` (the same DAgger round on `carla-focus`; 276 episodes, "
+                          "130,514 frames)",
 }
 
 
 def _data_line(folders: list[str]) -> str:
     """The collections a checkpoint was trained on, in words."""
-    return " and ".join(DATA.get(f, f"`{f}`") for f in folders)
+    return "; ".join(DATA.get(f, f"`{f}`") for f in folders)
 
 
 def card(name: str, summary: dict, train_s: float | None, eval_cmd: str,
@@ -127,6 +133,8 @@ def main() -> None:
                     help="NAME=SECONDS (default: the training time in the checkpoint's metadata)")
     ap.add_argument("--eval-command", default="icrsumo evaluate --agent NAME")
     ap.add_argument("--extra", action="append", default=[], help="LABEL=SUMMARY.json=COMMAND")
+    ap.add_argument("--note", action="append", default=[],
+                    help="NAME=TEXT: a paragraph under 'Other measurements' in NAME's card")
     args = ap.parse_args()
     extra = []
     for item in args.extra:
@@ -136,6 +144,9 @@ def main() -> None:
     secs = {k: float(v) for k, v in (s.split("=", 1) for s in args.train_seconds)}
     for p in sorted(CHECKPOINTS.glob("*.pt")):
         card_text = card(p.stem, summary, secs.get(p.stem), args.eval_command, extra)
+        notes = [t for n, t in (x.split("=", 1) for x in args.note) if n == p.stem]
+        if notes:
+            card_text += "\n".join(["## Other measurements", "", *(f"{t}\n" for t in notes)])
         (CHECKPOINTS / f"{p.stem}.md").write_text(card_text)
         print(f"wrote {CHECKPOINTS / (p.stem + '.md')}")
 
