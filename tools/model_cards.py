@@ -146,7 +146,7 @@ def main() -> None:
         card_text = card(p.stem, summary, secs.get(p.stem), args.eval_command, extra)
         notes = [t for n, t in (x.split("=", 1) for x in args.note) if n == p.stem]
         if notes:
-            card_text += "\n".join(["## Other measurements", "", *(f"{t}\n" for t in notes)])
+            card_text += "\n" + "\n".join(["## Other measurements", "", *(f"{t}\n" for t in notes)])
         (CHECKPOINTS / f"{p.stem}.md").write_text(card_text)
         print(f"wrote {CHECKPOINTS / (p.stem + '.md')}")
 

@@ -447,3 +447,41 @@ def test_instruction_follower_follows_closely_spaced_maneuvers(route, until, bef
         log = run_episode(read_scenario(sc_dir), read_instruction_sets(instr)[0], InstructionFollower(),
                           callbacks=[_StopPast(until)])
         pytest.fail(f"{log.termination.value} at {log.termination_t:.1f} s: {before}")
+
+
+def _follower_on(town: str, intent, text: str = ""):
+    from icrsumo.agents.privileged import _RING_WORDS, InstructionFollower
+
+    f = InstructionFollower()
+    f.net = load_net(bundled_towns()[town])
+    f.intent = intent
+    f._ring_named = bool(_RING_WORDS.search(text))
+    return f
+
+
+def test_a_roundabout_instruction_takes_the_ring_not_the_slip_road():
+    """Town03, edge 34 (carla_fidelity_junctions_005): the approach offers the roundabout
+    (-36, straight on) and a slip road to the right (15). "Take the first exit out of the
+    roundabout." reads as right: the follower took the slip road and left the route."""
+    from icrsumo.types import Intent
+
+    f = _follower_on("Town03", Intent.RIGHT, "Take the first exit out of the roundabout.")
+    assert "-36" in f.net.roundabout_edges and "15" not in f.net.roundabout_edges
+    assert f.choose(None, "34", ["-36", "15"], tentative=False) == "-36"
+    # a plain right turn there still takes the slip road
+    plain = _follower_on("Town03", Intent.RIGHT, "Turn right.")
+    assert plain.choose(None, "34", ["-36", "15"], tentative=False) == "15"
+
+
+def test_an_instruction_is_used_up_by_the_junction_it_names():
+    """Town04 (carla_fidelity_junctions_006): "Make a right turn at the traffic light." is
+    carried out at the end of edge 25; 3.6 m later, at the end of edge 13, the route goes
+    straight on (12). The follower turned right again (21) before the next instruction came."""
+    from icrsumo.types import Intent
+
+    f = _follower_on("Town04", Intent.RIGHT, "Make a right turn at the traffic light.")
+    assert f.choose(None, "25", ["-14", "13", "24"], tentative=False) == "13"
+    assert f.choose(None, "13", ["12", "21"], tentative=True) == "12"
+    assert f.choose(None, "13", ["12", "21"], tentative=False) == "12"
+    # the same junction may be chosen again (a replan) and keeps the instruction's branch
+    assert f.choose(None, "25", ["-14", "13", "24"], tentative=False) == "13"
