@@ -117,18 +117,18 @@ class TokenAgent(LearnedAgent):
     """``bev-token``: word-token GRU language encoder, trained on baseline phrasings only."""
 
     name = "bev-token"
-    checkpoint = "bev-token.pt"
+    checkpoint = str(CHECKPOINTS / "bev-token.pt")  # the shipped file, never one in the cwd
 
 
 class NgramAgent(LearnedAgent):
     """``bev-ngram``: hashed character n-gram language encoder, baseline phrasings only."""
 
     name = "bev-ngram"
-    checkpoint = "bev-ngram.pt"
+    checkpoint = str(CHECKPOINTS / "bev-ngram.pt")  # the shipped file, never one in the cwd
 
 
 class NgramAugAgent(LearnedAgent):
     """``bev-ngram-aug``: as ``bev-ngram``, trained with ``--augment-instructions``."""
 
     name = "bev-ngram-aug"
-    checkpoint = "bev-ngram-aug.pt"
+    checkpoint = str(CHECKPOINTS / "bev-ngram-aug.pt")  # the shipped file, never one in the cwd

@@ -71,3 +71,18 @@ def test_learned_agent_closed_loop_is_repeatable(name, converted, generated):
     a = dumps_log(run_episode(sc, iset, make_agent(name)))
     b = dumps_log(run_episode(sc, iset, make_agent(name)))
     assert a == b
+
+
+def test_a_shipped_agent_loads_the_shipped_checkpoint_whatever_the_cwd(tmp_path, monkeypatch):
+    """A file named like a shipped checkpoint in the working directory (a copy of an older
+    checkpoint, say) must not replace the shipped one: it did, silently, before."""
+    import shutil
+
+    from icrsumo.learn.agent import checkpoint_path
+
+    other = tmp_path / "bev-ngram.pt"
+    shutil.copy(CHECKPOINTS / "bev-token.pt", other)
+    monkeypatch.chdir(tmp_path)
+    for name in SHIPPED:
+        cls = BUILTIN[name]
+        assert checkpoint_path(cls.checkpoint) == CHECKPOINTS / f"{name}.pt"
