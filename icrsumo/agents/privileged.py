@@ -685,7 +685,6 @@ class InstructionFollower(PathDriver):
         # the active instruction names a roundabout: at its entry the ring is taken, not a bypass
         self._ring_named = False
         self._ring_exits = 0
-        self._ring_edge = ""
         # the edge at whose end the active instruction's maneuver was committed to: an
         # instruction names one junction, so the junctions after it are driven by the road
         self._spent: str | None = None
@@ -698,7 +697,6 @@ class InstructionFollower(PathDriver):
         self._lane_goal = self._lane_carry = None
         self._ring_named = False
         self._ring_exits = 0
-        self._ring_edge = ""
         self._spent = None
 
     def observe(self, obs: Observation) -> None:
@@ -752,8 +750,6 @@ class InstructionFollower(PathDriver):
             if into:
                 return into[0]
         if edge in ring:
-            if edge != self._ring_edge:
-                self._ring_edge = edge
             target = {Intent.RIGHT: 1, Intent.STRAIGHT: 2, Intent.LEFT: 3}.get(intent, 2)
             exits = [o for o in options if o not in ring]
             on_ring = [o for o in options if o in ring]
@@ -773,37 +769,6 @@ class InstructionFollower(PathDriver):
                     if d in dirs[o]:
                         if not tentative and not any(n in ring for n in (o, *options)):
                             self._spent = edge
-                        return o
-        for d in ("s", "L", "R", "r", "l"):
-            for o in options:
-                if d in dirs[o]:
-                    return o
-        return options[0]
-        ring = net.roundabout_edges
-        if self._ring_named and edge not in ring:
-            # "take the n-th exit of the roundabout": the ring, not a slip road past it
-            into = [o for o in options if o in ring]
-            if into:
-                return into[0]
-        if edge in ring:
-            if edge != self._ring_edge:
-                self._ring_edge = edge
-            target = {Intent.RIGHT: 1, Intent.STRAIGHT: 2, Intent.LEFT: 3}.get(self.intent, 2)
-            exits = [o for o in options if o not in ring]
-            on_ring = [o for o in options if o in ring]
-            if exits and (self._ring_exits + 1 >= target or not on_ring):
-                if not tentative:
-                    self._ring_exits = 0
-                return exits[0]
-            if exits and not tentative:
-                self._ring_exits += 1
-            return on_ring[0] if on_ring else options[0]
-        dirs = {o: {c.direction for c in net.connections[(edge, o)]} for o in options}
-        want = {Intent.LEFT: ("l", "L"), Intent.RIGHT: ("r", "R"), Intent.STRAIGHT: ("s",)}.get(self.intent)
-        if want:
-            for d in want:
-                for o in options:
-                    if d in dirs[o]:
                         return o
         for d in ("s", "L", "R", "r", "l"):
             for o in options:
