@@ -37,12 +37,19 @@ from .traffic import TRAFFIC_LEVELS, fleet_cap, make_traffic
 from .types import RouteSpec
 
 #: bump when the scenario output changes for the same input, to invalidate reuse
-CONVERTER_VERSION = 2
+CONVERTER_VERSION = 3
 #: s a background vehicle may stand stuck before SUMO teleports it: below the leaderboard's 180 s
 #: "blocked" rule, so a background jam dissolves before it can end the ego's route. The ego's
 #: vType sets timeToTeleport="-1": SUMO counts the ego's waiting time like any vehicle's and would
 #: otherwise teleport the ego too (measured: two carla-fidelity routes ended so)
 TELEPORT_S = 120.0
+#: s of waiting after which a background driver at a minor link is fully impatient (SUMO's
+#: --time-to-impatience; its default is 180 s): it then takes a gap that makes a car with the
+#: right of way brake. A left turner at a permissive green facing a steady oncoming stream
+#: otherwise holds its lane for cycle after cycle (its waiting time restarts whenever it creeps),
+#: and a queue behind it stands past the leaderboard's 180 s blocked rule
+#: (``carla_fidelity_mixed_024``, Town04)
+IMPATIENCE_S = 60.0
 #: ego vehicle footprint (m), a mid-size car as CARLA's Lincoln MKZ
 EGO_LENGTH, EGO_WIDTH = 4.9, 2.1
 
@@ -182,7 +189,7 @@ def _sumocfg(net_rel: str, route_files: list[str], seed: int, end: float, max_ve
     # collision.mingap-factor 0: a collision is a contact (gap < 0); SUMO's default also counts a
     # same-lane gap below the follower's minGap (2.5 m), which is no contact (see README,
     # *Fidelity on CARLA's towns*). max-num-vehicles caps the background fleet (traffic.fleet_cap;
-    # the ego is placed with moveToXY, which inserts it regardless); TELEPORT_S: see there
+    # the ego is placed with moveToXY, which inserts it regardless); TELEPORT_S, IMPATIENCE_S: see there
     files = ",".join(route_files)
     cap = f'\n        <max-num-vehicles value="{max_vehicles}"/>' if max_vehicles >= 0 else ""
     return f"""<?xml version="1.0" encoding="UTF-8"?>
@@ -200,7 +207,8 @@ def _sumocfg(net_rel: str, route_files: list[str], seed: int, end: float, max_ve
         <collision.action value="warn"/>
         <collision.check-junctions value="true"/>
         <collision.mingap-factor value="0"/>
-        <time-to-teleport value="{TELEPORT_S:.0f}"/>{cap}
+        <time-to-teleport value="{TELEPORT_S:.0f}"/>
+        <time-to-impatience value="{IMPATIENCE_S:.0f}"/>{cap}
     </processing>
     <random_number>
         <seed value="{seed}"/>

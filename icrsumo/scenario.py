@@ -241,7 +241,8 @@ def check_manifest(m: dict, c: DocChecker) -> None:
 SUMOCFG_SECTIONS = frozenset({"configuration", "input", "time", "processing", "random_number", "report"})
 SUMOCFG_OPTIONS = SUMOCFG_SECTIONS | {
     "net-file", "route-files", "begin", "end", "step-length", "collision.action",
-    "collision.check-junctions", "collision.mingap-factor", "time-to-teleport", "max-num-vehicles", "seed",
+    "collision.check-junctions", "collision.mingap-factor", "time-to-teleport", "time-to-impatience",
+    "max-num-vehicles", "seed",
     "no-step-log",
     "duration-log.disable", "no-warnings"}
 
@@ -272,7 +273,7 @@ def _check_option(shown: Path, tag: str, value: str, step_length: float) -> None
         if abs(number(0.0, 1.0) - step_length) > 1e-9:
             raise InputError(shown, place, f"differs from the manifest's step_length {step_length:g} s",
                              _FIX)
-    elif tag in ("collision.mingap-factor", "time-to-teleport", "max-num-vehicles"):
+    elif tag in ("collision.mingap-factor", "time-to-teleport", "time-to-impatience", "max-num-vehicles"):
         number(-1.0, 1e7)
     elif tag == "seed":
         if not value.isdigit() or int(value) > 2**31 - 1:

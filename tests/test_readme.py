@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 import icrsumo
+from icrsumo.convert import CONVERTER_VERSION
 from icrsumo.evaluation import EvalResult
 from icrsumo.scenario import Scenario
 
@@ -74,7 +75,7 @@ def test_the_python_api_example_runs(tmp_path, converted, capsys):
         assert (out / name).is_file(), name
     assert json.loads((out / "config.json").read_text()) == {"suite": "tiny", "seed": 2026, "k": 1,
                                                              "traffic": "normal", "scoring": "lb1",
-                                                             "converter": 2}
+                                                             "converter": CONVERTER_VERSION}
 
     # a rerun finds everything stored: nothing runs, the same summary; not quiet, the table prints
     summary = (out / "summary.json").read_bytes()

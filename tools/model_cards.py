@@ -52,19 +52,28 @@ SCORED_BY = {"lb1": "CARLA Leaderboard 1.0's rules", "lb2": "CARLA Leaderboard 2
 #: collect folder name -> what it holds (the command that wrote it and its routes)
 DATA = {
     "train": "`icrsumo collect --out train` (the bundled `train` split: 272 routes on icrsumo's six "
-             "towns that share no edge sequence with the evaluation splits; 816 episodes, 278,002 frames)",
+             "towns that share no edge sequence with the evaluation splits; 816 episodes, 276,911 frames)",
     "carla-train": "`icrsumo collect --suite carla-train --out carla-train` (128 random routes on CARLA's "
-                   "eight towns, none of which drives a whole LangAuto route; 384 episodes, 201,148 frames)",
+                   "eight towns, none of which drives a whole LangAuto route; 384 episodes, 201,585 frames)",
     "carla-focus": "`icrsumo collect --suite carla-focus --out carla-focus` (92 routes on CARLA's towns, "
                    "each with a lane change across two lanes or more or a roundabout; none drives a whole "
-                   "LangAuto route; 276 episodes, 116,358 frames)",
+                   "LangAuto route; 276 episodes, 116,359 frames)",
+    "dagger1-carla-train": "`icrsumo collect --suite carla-train --driver FIRST.pt --passes 1 --out "
+                           "dagger1-carla-train` (the first DAgger round: `FIRST.pt`, the first checkpoint "
+                           "of `bev-ngram-aug` trained on the three folders above (SHA-256 ee418b07..., not "
+                           "kept in the repository), drives its clean pass, the expert labels; 128 episodes, "
+                           "63,525 frames)",
+    "dagger1-carla-focus": "`icrsumo collect --suite carla-focus --driver FIRST.pt --passes 1 --out "
+                           "dagger1-carla-focus` (the first DAgger round on `carla-focus`; 92 episodes, "
+                           "43,703 frames)",
     "dagger-carla-train": "`icrsumo collect --suite carla-train --driver bev-ngram-aug --out "
-                          "dagger-carla-train` (a DAgger round: the first checkpoint of `bev-ngram-aug` "
-                          "trained on the three folders above drives, the expert labels; 384 episodes, "
-                          "197,331 frames)",
+                          "dagger-carla-train` (the second DAgger round: the checkpoint of `bev-ngram-aug` "
+                          "trained on the expert folders and the first round (SHA-256 9a949907..., shipped "
+                          "before, in the git history) drives, the expert labels; 384 episodes, "
+                          "195,077 frames)",
     "dagger-carla-focus": "`icrsumo collect --suite carla-focus --driver bev-ngram-aug --out "
-                          "dagger-carla-focus` (the same DAgger round on `carla-focus`; 276 episodes, "
-                          "130,514 frames)",
+                          "dagger-carla-focus` (the second DAgger round on `carla-focus`; 276 episodes, "
+                          "123,272 frames)",
 }
 
 
@@ -101,8 +110,8 @@ def card(name: str, summary: dict, train_s: float | None, eval_cmd: str,
         "exported from these weights in memory (`icrsumo.learn.runtime`); the tables below were "
         "measured so.", "",
         "## Data and training", "",
-        "- Data: " + _data_line(meta["data"]) + "; 3 passes per route, pass 0 clean and "
-        "passes 1-2 with perturbations for recovery; route-oracle expert labels (its final "
+        "- Data: " + _data_line(meta["data"]) + "; 3 passes per route unless said otherwise, pass 0 "
+        "clean and passes 1-2 with perturbations for recovery; route-oracle expert labels (its final "
         "standstill dropped where it got stuck); 5 Hz. "
         f"{meta['frames']:,} training frames; the routes with `val_fraction` held out for validation. "
         "Neither LangAuto's evaluation routes nor the evaluation template banks are ever read.",

@@ -78,8 +78,8 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None)
             shown = ", ".join(f"{k}={old.get(k)!r} (now {compared[k]!r})" for k in diff)
             fix = "use another --out folder, or the same options"
             if "converter" in diff:
-                fix = ("its scenarios were converted by an earlier icrsumo (before the background fleet "
-                       "was capped, README *Background traffic*), so new episodes would not be comparable: "
+                fix = ("its scenarios were converted by an earlier icrsumo, whose background traffic "
+                       "differs (docs/fidelity.md, class F), so new episodes would not be comparable: "
                        "run again into another --out folder")
             elif "scoring" in diff and old.get("scoring") is None:
                 fix = ("its episodes were scored before icrsumo scored by the leaderboard's own rules: "

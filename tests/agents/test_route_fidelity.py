@@ -154,6 +154,29 @@ def test_sumo_never_teleports_the_ego_out_of_a_queue(tmp_path):
     assert log.termination == "completed"
 
 
+@pytest.mark.sumo
+def test_a_left_turner_waiting_for_a_gap_does_not_hold_the_queue_behind_it_forever():
+    """Class F: on Town04's downtown (``carla_fidelity_mixed_024``) a background car waits at a
+    permissive green to turn left across a steady oncoming stream, cycle after cycle (its
+    waiting time restarts whenever it creeps), with the ego queued behind it on a one-lane
+    approach: the ego stood there past the blocked rule (DS 56.3). Scenarios make a background
+    driver fully impatient after IMPATIENCE_S s of waiting (SUMO's --time-to-impatience,
+    default 180 s): it then takes a gap that makes the oncoming car brake."""
+    from icrsumo.agents.privileged import RouteOracle
+    from icrsumo.cache import bundled_route
+    from icrsumo.convert import IMPATIENCE_S
+    from icrsumo.instructions.store import read_instruction_sets
+    from icrsumo.metrics import score_episode
+    from icrsumo.scenario import read_scenario
+    from icrsumo.sim.episode import run_episode
+
+    sc_dir, instr = bundled_route("carla_fidelity_mixed_024", "carla-fidelity")
+    cfg = (sc_dir / "scenario.sumocfg").read_text(encoding="utf-8")
+    assert f'<time-to-impatience value="{IMPATIENCE_S:.0f}"/>' in cfg
+    log = run_episode(read_scenario(sc_dir), read_instruction_sets(instr)[0], RouteOracle())
+    assert log.termination == "completed" and score_episode(log).ds == 100.0
+
+
 class _OncomingAtGreen(EpisodeCallback):
     """Class D set-up on Town01's junction 54, where the left turn ``-1`` -> ``-25`` gets a
     permissive ``g`` in the same phase as the oncoming straight ``2`` -> ``1`` gets ``G``: the

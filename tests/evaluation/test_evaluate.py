@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from icrsumo.cli import main
+from icrsumo.convert import CONVERTER_VERSION
 from icrsumo.evaluation import EvalOptions, run_evaluation
 from icrsumo.store import ResultStore
 
@@ -164,12 +165,13 @@ def test_another_scoring_is_another_configuration(reference, capsys):
 
 
 def test_a_folder_converted_by_an_earlier_icrsumo_is_not_resumed(reference, capsys):
-    """Scenarios of an earlier converter (before the background fleet was capped) hold other
-    traffic: new episodes would not pair with the stored ones."""
+    """Scenarios of an earlier converter (before the background fleet was capped, or before
+    background drivers grew impatient) hold other traffic: new episodes would not pair with the
+    stored ones."""
     ref_out, _ = reference
     raw = (ref_out / "config.json").read_bytes()
     cfg = json.loads(raw)
-    assert cfg["converter"] == 2
+    assert cfg["converter"] == CONVERTER_VERSION
     (ref_out / "config.json").write_text(json.dumps({k: v for k, v in cfg.items() if k != "converter"}))
     try:
         code = main(["evaluate", "--out", str(ref_out), "--routes", ",".join(ROUTES), "--k", "2",
