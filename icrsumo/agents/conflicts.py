@@ -62,6 +62,8 @@ class ConflictMap:
         self.net = net
         self._by_junction: dict[str, list[Connection]] | None = None
         self._cache: dict[tuple[str, str, int], tuple[Conflict, ...]] = {}
+        self._into: dict[tuple[str, int], list[Connection]] | None = None
+        self._approach: dict[str, tuple[tuple[np.ndarray, np.ndarray, float], ...]] = {}
 
     def _junctions(self) -> dict[str, list[Connection]]:
         if self._by_junction is None:
@@ -72,6 +74,33 @@ class ConflictMap:
                         index[junction_of(c.via)].append(c)
             self._by_junction = dict(index)
         return self._by_junction
+
+    def approaches(self, lane: str) -> tuple[tuple[np.ndarray, np.ndarray, float], ...]:
+        """The ways into ``lane``: per connection that leads into it, the connection's
+        internal lanes and then the lane's own shape, as (polyline (M, 2) m, its arc length (M,)
+        m, arc length at which ``lane`` begins, m); the lane's shape alone (offset 0) when nothing
+        leads into it. A car coming up behind the ego near the start of a short lane is still on
+        one of those. The incoming lanes before them are left out: a car there may be bound for
+        another connection."""
+        if lane not in self._approach:
+            net = self.net
+            if self._into is None:
+                into: dict[tuple[str, int], list[Connection]] = defaultdict(list)
+                for conns in net.connections.values():
+                    for c in conns:
+                        into[(c.to_edge, c.to_lane)].append(c)
+                self._into = dict(into)
+            own = net.lane_shape[lane]
+            own_len = float(polyline_cumlen(own)[-1])
+            edge, index = lane.rsplit("_", 1)
+            found = []
+            for c in self._into.get((edge, int(index)), ()):
+                path = np.concatenate([_chain(net, c), own])
+                path = path[np.concatenate([[True], np.hypot(*np.diff(path, axis=0).T) > 1e-3])]
+                cum = polyline_cumlen(path)
+                found.append((path, cum, float(cum[-1]) - own_len))
+            self._approach[lane] = tuple(found) or ((own, polyline_cumlen(own), 0.0),)
+        return self._approach[lane]
 
     def __call__(self, conn: Connection) -> tuple[Conflict, ...]:
         key = (conn.via, conn.to_edge, conn.to_lane)

@@ -408,12 +408,15 @@ class PathDriver(ABC):
         if len(w.vehicles) == 0:
             return False
         lane = f"{edge}_{lane_index}"
-        shape = self.net.lane_shape[lane]
-        cum = polyline_cumlen(shape)
-        scale = self.net.lane_length[lane] / max(float(cum[-1]), 1e-9)   # lane position per shape m
-        # along the lane's own polyline: on a curved lane a car 25 m back lies metres off the
-        # straight line through the ego's position
-        s_v = project(shape, cum, w.vehicles[:, :2], w.vehicles[:, 2], corridor=1.8) * scale
+        scale = self.net.lane_length[lane] / max(float(polyline_cumlen(self.net.lane_shape[lane])[-1]), 1e-9)
+        # along the lane's own polyline (on a curved lane a car 25 m back lies metres off the
+        # straight line through the ego's position), and back along the ways into it: near the
+        # start of a short lane the car coming up is still on the internal lane before it
+        # (carla_fidelity_revisit_014: a 9 m edge, the car 20 m back inside the junction before)
+        s_v = np.full(len(w.vehicles), np.nan)
+        for path, cum, start in self._map().approaches(lane):
+            s = project(path, cum, w.vehicles[:, :2], w.vehicles[:, 2], corridor=1.8) - start
+            s_v = np.where(np.isnan(s_v), np.where(s > 0.0, s * scale, s), s_v)
         half = 0.5 * w.vehicles[:, 3]
         speeds = _known(self._speeds, len(w.vehicles))
         closing = np.where(np.isfinite(speeds), speeds, UNSEEN_SPEED) - w.ego.speed
@@ -606,10 +609,13 @@ class PathDriver(ABC):
                 stop = min(stop, s_c - CONFLICT_CLEAR)
         return stop
 
-    def _conflicts(self, conn: Connection) -> tuple[Conflict, ...]:
+    def _map(self) -> ConflictMap:
         if self._conflict_map is None or self._conflict_map.net is not self.net:
             self._conflict_map = ConflictMap(self.net)
-        return self._conflict_map(conn)
+        return self._conflict_map
+
+    def _conflicts(self, conn: Connection) -> tuple[Conflict, ...]:
+        return self._map()(conn)
 
     # ----------------------------------------------------------------- output
     def _waypoints(self, w: World, path: _Path) -> np.ndarray:

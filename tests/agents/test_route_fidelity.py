@@ -112,6 +112,39 @@ def test_lane_change_gap_is_judged_by_time_to_reach_the_ego(back, speed, free):
     assert oracle._lane_free(_world(net, ego, [car]), edge, lanes[1], pos) is free
 
 
+@pytest.mark.parametrize(("speed", "coming"), [(11.5, True), (0.0, False)])
+def test_a_car_coming_up_inside_the_junction_before_a_short_lane_is_seen(speed, coming):
+    """Class C on a short target lane (``carla_fidelity_revisit_014``, Town10HD): edge ``-14``
+    is 9.2 m long, so a car 20 m behind the ego is still on the internal lane of the junction
+    before it, off the lane's own polyline. The follower moved from lane 2 to lane 1 for its
+    right turn at 2 m/s and a car at 11.5 m/s ran into it; the check now looks back along the
+    ways into the lane (the internal lanes of the connections into it). A car standing there
+    does not come up."""
+    import numpy as np
+
+    from icrsumo.agents.privileged import InstructionFollower
+    from icrsumo.dynamics import EgoState
+
+    net = load_net(bundled_towns()["Town10HD"])
+    assert net.edge_length["-14"] < 10.0
+    driver = InstructionFollower()
+    driver.net = net
+    length = driver.params.length
+    pos = 6.0                                  # the ego's front, on lane 2, wanting lane 1
+    fx, fy, h = net.lane_pose("-14_2", pos)
+    ego = EgoState(fx - 0.5 * length * math.cos(h), fy - 0.5 * length * math.sin(h), h, 2.0)
+    path, cum, start = driver._map().approaches("-14_1")[0]
+    s_car = start + pos - length - 20.0 - 2.4   # its centre: its front 20 m behind the ego's rear
+    i = int(np.searchsorted(cum, s_car)) - 1
+    t = (s_car - cum[i]) / (cum[i + 1] - cum[i])
+    (x0, y0), (x1, y1) = path[i], path[i + 1]
+    car = [x0 + t * (x1 - x0), y0 + t * (y1 - y0), math.atan2(y1 - y0, x1 - x0), 4.8, 1.9]
+    assert not any(lane.startswith("-14_") for lane, *_ in net.project(car[0], car[1], 1.0))
+    assert 0.0 < s_car < start                  # on the internal lane before the edge
+    driver._speeds = np.array([speed])
+    assert driver._coming_up(_world(net, ego, [car]), "-14", 1, pos) is coming
+
+
 @pytest.mark.sumo
 def test_fleet_cap_holds_background_traffic_and_never_the_ego(tmp_path):
     """Class F: scenarios cap the background fleet (SUMO's max-num-vehicles); the ego is placed
