@@ -110,8 +110,8 @@ for _cls in (TokenAgent, NgramAgent, NgramAugAgent):
         register(_cls.name, _cls, description=(_cls.__doc__ or "").strip().splitlines()[0])
 del _cls
 
-#: the agent `icrsumo evaluate` uses when none is named: the shipped learned agent with the
-#: augmented text encoder, whose paraphrase and noise Δs are the smallest (README, Learned agents)
+#: the agent `icrsumo evaluate` uses when none is named: the shipped learned agent whose text
+#: encoder was trained with the training bank's paraphrases and noise (README, Learned agents)
 DEFAULT_AGENT = "bev-ngram-aug" if "bev-ngram-aug" in REGISTRY else "instruction-follower"
 
 
