@@ -4,15 +4,20 @@ Pure (numpy and scipy's Wilcoxon test): the same records, in any order, give the
 
 Definitions (per agent and family f; crashed episodes are counted and excluded from every mean):
 
-- DS, RC, IS: plain means over the family's episodes (routes x k);
-- the pairing unit is a route r (with its seed); only routes whose baseline episode is not
-  crashed take part. dM = mean over all pairs (r, k) of M(r, f, k) - M(r, baseline);
+- the pairing unit is a route r (with its seed); a *complete pair* (r, k) is a finished variant
+  episode of f whose route's baseline episode finished too. Every number of a family is
+  computed on its complete pairs alone, so means, deltas, intervals, p-values and flips cover
+  the same episodes: ``n`` counts them, ``n_crashed`` the family's crashed episodes and
+  ``unpaired`` its finished episodes whose baseline crashed (left out);
+- DS, RC, IS: plain means over the complete pairs' variant episodes; base_DS, base_RC,
+  base_IS: the means of their baseline episodes (one per pair), so dM = M - base_M;
+- dM = mean over all complete pairs (r, k) of M(r, f, k) - M(r, baseline);
 - worst_dDS = mean over routes of min over k of dDS_{f,k}(r);
 - dDS_ci95 / dRC_ci95: paired bootstrap 95 % percentile interval that resamples routes with
   replacement, each route contributing its mean delta over k (``numpy.random.default_rng``
   seeded with ``boot_seed`` afresh for every agent and family, so one family's interval does
   not depend on which other agents or families are in the records);
-- RD, TO: fraction of the family's episodes whose termination class is RD / TO;
+- RD, TO: fraction of the complete pairs' variant episodes whose termination class is RD / TO;
 - baseline_done_variant_failed: routes whose baseline terminated "done" while at least one
   (non-crashed) variant of the family did not;
 - pdr_DS / pdr_RC: the relative drop 1 - M_variant / M_baseline, both means over the family's
@@ -29,6 +34,7 @@ Values are rounded (4 decimals, IS and dIS 6); a quantity without data is ``None
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -103,20 +109,19 @@ def bootstrap_ci(route_means: np.ndarray, *, n_boot: int, seed: int,
 
 
 def _family_block(recs: list[EpisodeRecord], base: dict[_Key, EpisodeRecord], *,
-                  n_boot: int, boot_seed: int) -> dict[str, Any]:
-    block = _absolute(recs)
-    out: dict[str, Any] = {"DS": block["DS"], "RC": block["RC"], "IS": block["IS"]}
+                  n_boot: int, boot_seed: int, n_crashed: int = 0) -> dict[str, Any]:
+    paired = [r for r in recs if (r.route_id, r.seed) in base]
+    block = _absolute(paired)
+    pair_base = [base[(r.route_id, r.seed)] for r in paired]  # one baseline per pair
+    out: dict[str, Any] = {
+        "DS": block["DS"], "RC": block["RC"], "IS": block["IS"], "base_DS": _mean([b.ds for b in pair_base]),
+        "base_RC": _mean([b.rc for b in pair_base]), "base_IS": _mean([b.is_ for b in pair_base], 6)}
 
     per_route: dict[_Key, list[tuple[float, float, float]]] = {}
     failed: set[_Key] = set()
     lost = gained = 0
-    paired_base: list[tuple[float, float]] = []  # (DS, RC) of the baseline of every pair
-    for r in recs:  # sorted, so per-route lists are in k order
-        b = base.get((r.route_id, r.seed))
-        if b is None:
-            continue
+    for r, b in zip(paired, pair_base):  # sorted, so per-route lists are in k order
         per_route.setdefault((r.route_id, r.seed), []).append((r.ds - b.ds, r.rc - b.rc, r.is_ - b.is_))
-        paired_base.append((b.ds, b.rc))
         if b.termination_class == "done" and r.termination_class != "done":
             failed.add((r.route_id, r.seed))
             lost += 1
@@ -130,7 +135,7 @@ def _family_block(recs: list[EpisodeRecord], base: dict[_Key, EpisodeRecord], *,
         worst = float(np.mean([d[:, 0].min() for d in deltas]))
         route_means = np.stack([d[:, :2].mean(axis=0) for d in deltas])  # (R, 2)
         ci = bootstrap_ci(route_means, n_boot=n_boot, seed=boot_seed)
-        base_mean = np.asarray(paired_base, dtype=float).mean(axis=0)  # (DS, RC)
+        base_mean = np.asarray([(b.ds, b.rc) for b in pair_base], dtype=float).mean(axis=0)  # (DS, RC)
         out.update(
             dDS=_rnd(d_mean[0]), dRC=_rnd(d_mean[1]), dIS=_rnd(d_mean[2], 6), worst_dDS=_rnd(worst),
             dDS_ci95=[_rnd(ci[0, 0]), _rnd(ci[1, 0])], dRC_ci95=[_rnd(ci[0, 1]), _rnd(ci[1, 1])],
@@ -144,6 +149,7 @@ def _family_block(recs: list[EpisodeRecord], base: dict[_Key, EpisodeRecord], *,
         RD=block["RD"], TO=block["TO"], n=block["n"], n_routes=len(routes),
         baseline_done_variant_failed=len(failed),
         n_pairs=int(sum(len(d) for d in deltas)),
+        n_crashed=int(n_crashed), unpaired=len(recs) - len(paired),
         flips={"lost": lost, "gained": gained},
     )
     return out
@@ -197,15 +203,17 @@ def summarize(records: Iterable[EpisodeRecord], *, suite: str, seed: int, k: int
     n_crashed = sum(r.status == "crashed" for r in recs)
     agents: dict[str, Any] = {}
     for agent in sorted({r.agent for r in recs}):
+        crashed = Counter(r.family for r in recs if r.agent == agent and r.status == "crashed")
         mine = [r for r in recs if r.agent == agent and r.status != "crashed"]
         base_recs = [r for r in mine if r.family == BASELINE]
         base = {(r.route_id, r.seed): r for r in base_recs if r.k == 0}
         blocks = {f: _family_block([r for r in mine if r.family == f], base, n_boot=n_boot,
-                                   boot_seed=boot_seed) for f in fams}
+                                   boot_seed=boot_seed, n_crashed=crashed[f]) for f in fams}
         adjusted = holm([blocks[f]["p_value_raw"] for f in fams])
         for f, p in zip(fams, adjusted):
             blocks[f]["p_value"] = _rnd(p, 6)
-        agents[agent] = {"baseline": _absolute(base_recs), "families": blocks}
+        agents[agent] = {"baseline": {**_absolute(base_recs), "n_crashed": crashed[BASELINE]},
+                         "families": blocks}
     return {
         "suite": str(suite),
         "seed": int(seed),

@@ -12,10 +12,13 @@ All three are exported lazily by :mod:`icrsumo` (``icrsumo.evaluate(...)``). Bad
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from .errors import InputError
 
 if TYPE_CHECKING:
     from .agents.base import Agent
@@ -34,6 +37,38 @@ def _names(value: str | Sequence[str] | None) -> tuple[str, ...] | None:
     if value is None:
         return None
     return (str(value),) if isinstance(value, str) else tuple(str(v) for v in value)
+
+
+def _agents(value: Any) -> tuple | None:
+    """``agents`` as a tuple: specs (str) and agents given as Python objects (a class, a
+    function making agents, an instance) as they are; None stays None."""
+    if value is None:
+        return None
+    if isinstance(value, str) or not isinstance(value, (list, tuple)):
+        return (value,)
+    return tuple(value)
+
+
+#: command-line options -> the keyword arguments of :func:`evaluate` that stand for them
+_KEYWORDS = {"--agent": "agents", "--family": "families", "--replace-agent": "replace_agents",
+             "--rollout-route": "rollout_route", "--agent-timeout": "agent_timeout",
+             "--batch-inference": "batch_inference", "--max-batch": "max_batch",
+             "--inference-processes": "inference_processes", "--baseline-bank": "baseline_bank",
+             "--retry-crashed": "retry_crashed", "--routes": "routes", "--workers": "workers",
+             "--backend": "backend", "--address": "address", "--traffic": "traffic", "--scoring": "scoring",
+             "--suite": "suite", "--seed": "seed", "--out": "out", "--k": "k"}
+_OPTION = re.compile("|".join(re.escape(o) for o in sorted(_KEYWORDS, key=len, reverse=True)) + r"(?![\w-])")
+
+
+def for_python(err: InputError) -> InputError:
+    """``err`` in the words of the Python API: command-line options become keyword arguments
+    (``--agent`` -> ``agents``, ``use another --out folder`` -> ``use another out folder``)."""
+    def sub(text: str) -> str:
+        return _OPTION.sub(lambda m: _KEYWORDS[m.group(0)], text)
+
+    if not err.problem:
+        return InputError.of_line(sub(err.file))
+    return InputError(_KEYWORDS.get(err.file, err.file), err.place, sub(err.problem), sub(err.fix))
 
 
 def _options(out: str | Path, suite: str | Path, **given: Any) -> EvalOptions:
@@ -57,28 +92,44 @@ def evaluate(suite: str | Path = "tiny", agents: str | Sequence[str] | None = No
     For every agent and route of ``suite``: the baseline instructions and ``k`` variants of each
     of ``families`` (default: all four), all on the same scenario, seed and traffic; every
     episode is stored in ``out/results.sqlite`` as it ends, so a rerun with the same options
-    runs only what is missing. ``suite``: tiny, short, long, a route XML file or a convert-routes folder;
-    ``agents``: agent specs (a registered name such as ``route-oracle`` or ``bev-token``,
-    ``module:Class``, ``path/file.py:Class``, ``remote:http://HOST:PORT``; default: the default
-    agent of ``icrsumo evaluate``); ``workers``: worker processes (default: the number of
-    cores); ``quiet``: no progress bar and no table on the terminal. ``more``: the other fields
-    of :class:`icrsumo.evaluation.EvalOptions`: ``routes`` (route ids), ``backend`` (local,
-    ray), ``address``, ``traffic``, ``rollout_route``, ``agent_timeout`` (s, None: no limit),
-    ``batch_inference`` (a device), ``max_batch``, ``inference_processes``, ``agent_device``,
-    ``baseline_bank`` (LMDrive's instruction dictionary: LangAuto's own baseline wording, part
-    of the folder's configuration), ``scoring`` (``lb1``: CARLA Leaderboard 1.0's rules, part of
-    the folder's configuration).
+    runs only what is missing. ``suite``: tiny, short, long, a route XML file or a convert-routes
+    folder; ``agents``: one agent or a list of them, each a spec (a registered name such as
+    ``route-oracle``, ``module:Class``, ``path/file.py:Class``, ``remote:http://HOST:PORT``), an
+    agent class or a function that makes agents, or an agent instance (copied afresh for every
+    episode); default: the default agent of ``icrsumo evaluate``; ``workers``: worker processes
+    (default: the number of cores); ``quiet``: no progress bar and no table on the terminal.
+    ``more``: the other fields of :class:`icrsumo.evaluation.EvalOptions`: ``routes`` (route ids),
+    ``backend`` (local, ray), ``address``, ``traffic``, ``rollout_route``, ``agent_timeout`` (s,
+    None: no limit), ``batch_inference`` (a device), ``max_batch``, ``inference_processes``,
+    ``agent_device``, ``baseline_bank`` (LMDrive's instruction dictionary: LangAuto's own baseline
+    wording, part of the folder's configuration), ``scoring`` (``lb1``: CARLA Leaderboard 1.0's
+    rules, part of the folder's configuration), ``replace_agents`` (names whose stored episodes
+    another agent of that name drove are deleted and run again), ``retry_crashed``.
 
     Returns an :class:`icrsumo.evaluation.EvalResult`: ``summary`` (OUT/summary.json),
     ``out``, the episode counts and the batched-inference statistics. Raises
     :class:`icrsumo.errors.InputError` for bad input (nothing is written then) and TypeError
     for an unknown option.
     """
+    try:
+        return evaluate_in_cli_words(suite, agents, families, k, seed, out, workers, quiet, **more)
+    except InputError as err:
+        raise for_python(err) from None
+
+
+def evaluate_in_cli_words(suite: str | Path = "tiny", agents: Any = None,
+                          families: str | Sequence[str] | None = None, k: int = 8, seed: int = 2026,
+                          out: str | Path = "icr_out", workers: int | None = None, quiet: bool = True,
+                          **more: Any) -> EvalResult:
+    """:func:`evaluate`, whose InputErrors name the command line's options (``icrsumo
+    evaluate`` calls this)."""
     from .evaluation import run_evaluation
 
     if "routes" in more:
         more["routes"] = _names(more["routes"]) or None
-    opts = _options(out, suite, agents=_names(agents), families=_names(families), k=k, seed=seed,
+    if "replace_agents" in more:
+        more["replace_agents"] = _names(more["replace_agents"]) or ()
+    opts = _options(out, suite, agents=_agents(agents), families=_names(families), k=k, seed=seed,
                     workers=workers, quiet=quiet, **more)
     return run_evaluation(opts)
 

@@ -26,13 +26,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .agents.registry import DEFAULT_AGENT, agent_name
+from .agents.registry import DEFAULT_AGENT, PYTHON_PREFIX
 from .convert import safe_name
 from .errors import InputError
 from .evaluation.options import EvalOptions
 from .evaluation.plan import Job, plan_jobs, prepare_suite
 from .evaluation.progress import Progress
-from .evaluation.run import resolve_agents, run_queue
+from .evaluation.run import (
+    check_agents,
+    claim_agents,
+    identify_agents,
+    resolve_agents,
+    run_queue,
+    with_factories,
+)
 from .fsio import dumps_json, read_json, write_atomic
 from .instructions.banks import load_banks
 from .instructions.rewrites import rewrite_pool
@@ -65,6 +72,8 @@ class AttackOptions:
     quiet: bool = True
     compare: Path | None = None
     agent_timeout: float | None = 60.0
+    #: agent names whose stored episodes of another agent of that name are deleted and run again
+    replace_agents: tuple[str, ...] = ()
 
     def eval_options(self) -> EvalOptions:
         """The evaluation options of the out folder (K = 1: the generated variants go unused)."""
@@ -80,6 +89,7 @@ class AttackOptions:
             traffic=self.traffic,
             quiet=self.quiet,
             agent_timeout=self.agent_timeout,
+            replace_agents=self.replace_agents,
         )
 
     def check(self) -> None:
@@ -160,17 +170,20 @@ def run_attack(opts: AttackOptions) -> dict:
     opts.check()
     eopts = opts.eval_options()
     factories = resolve_agents(opts.agents)
-    names = {spec: agent_name(spec, f) for spec, f in factories.items()}
+    ids = identify_agents(factories, opts.replace_agents)
+    eopts = replace(eopts, agents=ids.specs)
+    names = dict(ids.names)
     out = Path(opts.out)
-    ResultStore.check(out / "results.sqlite")
-    prep = prepare_suite(eopts)
+    check_agents(out / "results.sqlite", ids, opts.replace_agents)
+    prep = prepare_suite(eopts, ids.config())
     for line in prep.skipped:
         print(f"icrsumo: skipped: {line}", file=sys.stderr)
-    jobs = [
+    jobs = with_factories([
         j for j in plan_jobs(eopts, prep.scenarios, prep.instructions, names) if j.route_id in prep.routes
-    ]
+    ], factories)
     banks = load_banks(None)
     with ResultStore(out / "results.sqlite", verify=False) as store:  # checked above
+        claim_agents(store, ids, opts.replace_agents)
         have = store.keys()
         with Progress(len(jobs) * (opts.budget + 1), opts.quiet) as progress:
             run_queue([j for j in jobs if j.key not in have], eopts, store, progress)
@@ -214,7 +227,9 @@ def run_attack(opts: AttackOptions) -> dict:
                     _write_sets(path, s, [])
                     batch.append(
                         Job(
-                            s.spec, s.agent, s.route, Family.ATTACK.value, q, opts.seed, s.scenario, str(path)
+                            s.spec, s.agent, s.route, Family.ATTACK.value, q, opts.seed, s.scenario,
+                            str(path), factory=factories[s.spec] if s.spec.startswith(PYTHON_PREFIX)
+                            else None,
                         )
                     )
                 have = store.keys()
@@ -261,6 +276,7 @@ def _transfer(
     if len(agents) < 2:
         return {}
     spec_of = {j.agent: j.agent_spec for j in jobs}
+    factory_of = {j.agent: j.factory for j in jobs}
     base = _baselines(store)
     batch = []
     for s in searches:
@@ -291,6 +307,7 @@ def _transfer(
                         opts.seed,
                         s.scenario,
                         str(path),
+                        factory=factory_of[other],
                     )
                 )
     have = store.keys()

@@ -147,10 +147,10 @@ def _split_list(items: list[str] | None, option: str = "") -> tuple[str, ...]:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from .api import evaluate
+    from .api import evaluate_in_cli_words
 
     t0 = time.perf_counter()
-    result = evaluate(
+    result = evaluate_in_cli_words(
         suite=args.suite, agents=_split_list(args.agent, "--agent") or None,
         families=_split_list(args.family, "--family") or None,
         k=args.k, seed=args.seed, out=args.out, workers=args.workers, quiet=args.quiet,
@@ -159,11 +159,13 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         batch_inference=args.batch_inference, max_batch=args.max_batch,
         inference_processes=args.inference_processes, baseline_bank=args.baseline_bank,
         retry_crashed=args.retry_crashed, scoring=args.scoring,
+        replace_agents=_split_list(args.replace_agent, "--replace-agent"),
     )
-    again = " (stored as crashed: rerun with --retry-crashed to run them again)" if result.crashed else ""
+    again = (" (left out of every table, with their pairs; --retry-crashed runs them again)"
+             if result.crashed else "")
     print(f"{result.done} episodes done, {result.crashed} crashed{again}, {time.perf_counter() - t0:.0f} s "
           f"-> {args.out}", file=sys.stderr)
-    return 0
+    return 1 if args.fail_on_crash and result.crashed else 0
 
 
 def _cmd_attack(args: argparse.Namespace) -> int:
@@ -175,12 +177,62 @@ def _cmd_attack(args: argparse.Namespace) -> int:
     opts = AttackOptions(out=Path(args.out), suite=args.suite, seed=args.seed, budget=args.budget,
                          routes=_split_list(args.routes, "--routes") or None, constraint=args.constraint,
                          workers=args.workers, traffic=args.traffic, quiet=args.quiet, compare=args.compare,
-                         agent_timeout=timeout, **({"agents": agents} if agents else {}))
+                         agent_timeout=timeout,
+                         replace_agents=_split_list(args.replace_agent, "--replace-agent"),
+                         **({"agents": agents} if agents else {}))
     doc = run_attack(opts)
     if not args.quiet:
         print(attack_table(doc))
     print(f"attack: {sum(a['successes'] for a in doc['agents'].values())} routes broken, "
           f"{time.perf_counter() - t0:.0f} s -> {args.out}", file=sys.stderr)
+    return 0
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    from .agents.registry import DEFAULT_AGENT
+    from .show import show_episode
+
+    res = show_episode(Path(args.out), args.agent or DEFAULT_AGENT, args.route, args.family, args.k,
+                       Path(args.dir) if args.dir else None, spec=args.spec)
+    r = res.record
+    print(f"{r.route_id} {r.agent} {r.family}:{r.k}  DS {r.ds:.1f}  RC {r.rc:.1f}  IS {r.is_:.3f}  "
+          f"{r.termination} ({r.termination_class})")
+    print("the replay reproduces the stored log byte for byte" if res.identical else
+          f"the replay does NOT reproduce the stored log: {res.difference}")
+    print(f"video: {res.video}")
+    print(f"still at t = {res.moment_t:.1f} s ({res.moment}): {res.still}")
+    return 0 if res.identical else 1
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from .resources import bundled_suites
+    from .vocab import ALL_FAMILIES, CONTROL_FAMILIES, FAMILIES, FAMILY_DESCRIPTIONS
+
+    if args.what == "suites":
+        from .resources import suite_coords
+
+        for name, path in bundled_suites().items():
+            print(f"{name:16} {suite_coords(name) or 'sumo':6} {path.name}")
+    elif args.what == "routes":
+        from .routes import read_routes
+
+        path = bundled_suites().get(args.suite, Path(args.suite))
+        if not path.is_file():
+            raise InputError("--suite", args.suite, "unknown suite",
+                             f"use {', '.join(bundled_suites())} or a route XML file")
+        routes, _ = read_routes(path)
+        for r in routes:
+            print(f"{r.id:24} {r.town:10} {len(r.waypoints)} waypoints")
+    elif args.what == "agents":
+        from .agents.registry import DEFAULT_AGENT, REGISTRY
+
+        for name in REGISTRY:
+            mark = " (default)" if name == DEFAULT_AGENT else ""
+            print(f"{name:22} {REGISTRY.entry(name).description}{mark}")
+    else:
+        for fam in ALL_FAMILIES:
+            kind = "default" if fam in FAMILIES else "control" if fam in CONTROL_FAMILIES else ""
+            print(f"{fam.value:12} {kind:8} {FAMILY_DESCRIPTIONS[fam]}")
     return 0
 
 
@@ -370,9 +422,14 @@ def build_parser() -> argparse.ArgumentParser:
                    "crashed (default 60; 0: no limit)")
     v.add_argument("--scoring", choices=scoring_names(), default=DEFAULT_SCORING,
                    help=f"scoring rules (default {DEFAULT_SCORING}: CARLA Leaderboard 1.0's, rule by rule)")
+    v.add_argument("--fail-on-crash", action="store_true",
+                   help="exit with status 1 when any episode of the evaluation is stored as crashed (for CI)")
     v.add_argument("--retry-crashed", action="store_true",
                    help="run the episodes stored as crashed again (after a transient fault: a remote "
                    "server that was down, a wrong device)")
+    v.add_argument("--replace-agent", action="append", metavar="NAME",
+                   help="the out folder holds episodes of another agent of this name (other code or "
+                   "checkpoint): delete them and run this one (repeatable)")
     v.set_defaults(func=_cmd_evaluate)
 
     at = sub.add_parser(
@@ -398,7 +455,33 @@ def build_parser() -> argparse.ArgumentParser:
                     help="seconds an agent call may take (default 60; 0: no limit)")
     at.add_argument("--out", default="attack_out", help="output folder (default attack_out)")
     at.add_argument("--quiet", action="store_true", help="no progress bar or table")
+    at.add_argument("--replace-agent", action="append", metavar="NAME",
+                    help="the out folder holds episodes of another agent of this name (other code or "
+                    "checkpoint): delete them and run this one (repeatable)")
     at.set_defaults(func=_cmd_attack)
+
+    sh = sub.add_parser(
+        "show", help="watch a stored episode: replay it, check it is the same, write its video and a still",
+        description="Re-simulate one stored episode of an evaluate (or attack) folder, check that the replay "
+        "reproduces the stored log byte for byte, and write the BEV video with the active instruction and "
+        "notices, plus a still of the moment it went wrong (its first infraction, else where it ended). "
+        "Exit status 0: the replay is the stored episode, 1: it differs, 2: bad input.",
+    )
+    sh.add_argument("out", help="the --out folder of icrsumo evaluate or attack")
+    sh.add_argument("--agent", help="the stored agent name (default: evaluate's default agent)")
+    sh.add_argument("--route", required=True, help="route id")
+    sh.add_argument("--family", default="baseline", help="baseline (default), a family, attack or transfer")
+    sh.add_argument("--k", type=int, default=0, help="the variant (default 0)")
+    sh.add_argument("--spec", help="the agent spec, where the folder does not record it (older folders)")
+    sh.add_argument("--dir", help="where to write the video and the still (default OUT/show/...)")
+    sh.set_defaults(func=_cmd_show)
+
+    ls = sub.add_parser("list", help="what exists: bundled suites, a suite's routes, agents, families",
+                        description="Print the bundled suites (name, coordinate frame, file), the routes of "
+                        "a suite (--suite), the registered agents (the default marked) or the families.")
+    ls.add_argument("what", choices=["suites", "routes", "agents", "families"])
+    ls.add_argument("--suite", default="tiny", help="the suite whose routes to list (default tiny)")
+    ls.set_defaults(func=_cmd_list)
 
     r = sub.add_parser("report", help="rebuild summary, tables and figures of an evaluation folder")
     r.add_argument("out", help="the --out folder of icrsumo evaluate")

@@ -71,6 +71,21 @@ from .vocab import EventKind, TerminationClass
 ENV_ID = "icrsumo/ICRDrive-v0"
 
 
+def to_observation(obs: dict[str, Any], info: dict[str, Any]) -> Observation:
+    """The agent protocol's :class:`Observation` of an environment observation and the
+    ``info`` that came with it (``t``, ``instruction_id``): what ``agent.act`` takes, so any
+    icrsumo agent drives the environment (``agent.reset(info["episode_info"])`` after
+    ``env.reset()``; ``env.agent_action(agent.act(...))`` as the step's action)."""
+    def text(v: Any) -> str:
+        if isinstance(v, np.ndarray):
+            return bytes(v).rstrip(b"\0").decode("utf-8", "replace")
+        return str(v)
+
+    return Observation(t=float(info["t"]), bev=np.asarray(obs["bev"]),
+                       speed=float(np.asarray(obs["speed"])[0]), instruction=text(obs["instruction"]),
+                       instruction_id=int(info["instruction_id"]), notice=text(obs["notice"]))
+
+
 class _Penalties(EpisodeCallback):
     """The penalised event infractions of an episode as they happen (``kinds``, in order): the
     collisions :class:`~icrsumo.metrics.CollisionCounter` counts (on the positions the log
@@ -241,7 +256,8 @@ class ICRDriveEnv(gym.Env):
         self._rc_prev, self._n_inf, self._out_prev = self._rc(), 0, 0.0
         info = {"route_id": self.scenario.route_id, "town": self.scenario.town, "family": iset.family,
                 "k": iset.k, "route_length": self._episode.route.length,
-                "control_dt": self._episode.info.control_dt, "t": obs.t, "instruction_id": obs.instruction_id}
+                "control_dt": self._episode.info.control_dt, "t": obs.t, "instruction_id": obs.instruction_id,
+                "net": str(self.scenario.net), "episode_info": self._episode.info}
         return self._observe(obs), info
 
     def step(self, action: Any):
@@ -268,9 +284,9 @@ class ICRDriveEnv(gym.Env):
         if ep.route.length > 0:
             reward -= 100.0 * (out_m - self._out_prev) / ep.route.length
         self._out_prev = out_m
-        cols = ep.recorder.cols
-        info: dict[str, Any] = {"t": cols["t"][-1], "progress": ep.progress, "route_length": ep.route.length,
-                                "instruction_id": cols["instruction"][-1],
+        info: dict[str, Any] = {"t": (obs or self._obs).t, "progress": ep.progress,
+                                "route_length": ep.route.length,
+                                "instruction_id": (obs or self._obs).instruction_id,
                                 "infractions_so_far": len(infractions)}
         terminated = truncated = False
         if obs is None:
@@ -286,6 +302,27 @@ class ICRDriveEnv(gym.Env):
             })
         self._obs = obs
         return self._observe(obs), float(reward), bool(terminated), bool(truncated), info
+
+    def agent_action(self, action: Action) -> np.ndarray:
+        """An agent's :class:`Action` as this environment's action: [steer, throttle, brake]
+        (``action_type="control"``) or the first ``n_waypoints`` waypoints, the last one
+        repeated where there are fewer (``"waypoints"``; the speed is their spacing, so a
+        ``target_speed`` is not used). An AgentError when the agent's kind of action does not
+        fit the environment's."""
+        if self.action_type == "control":
+            if action.control is None:
+                raise AgentError("this environment takes control actions and the agent gave waypoints: make "
+                                 "it with action_type='waypoints'")
+            c = action.control
+            return np.array([c.steer, c.throttle, c.brake], np.float32)
+        if action.waypoints is None:
+            raise AgentError("this environment takes waypoints and the agent gave controls: make it with "
+                             "action_type='control'")
+        wp = np.asarray(action.waypoints, np.float32).reshape(-1, 2)
+        if len(wp) == 0:
+            raise AgentError("the agent gave no waypoints")
+        idx = np.minimum(np.arange(self.n_waypoints), len(wp) - 1)
+        return wp[idx]
 
     def render(self) -> np.ndarray | None:
         """``rgb_array``: the current BEV raster as an (128, 128, 3) RGB image."""

@@ -499,6 +499,18 @@ def _ascii(text: str) -> str:
     return "".join(ch if 32 <= ord(ch) < 127 else ("?" if not ch.isspace() else " ") for ch in text)
 
 
+def write_image(path: Path, bgr: np.ndarray, caption: str = "") -> None:
+    """Write a BGR frame (:meth:`VideoWriter.frame`) as an image file (PNG by its suffix), with
+    an optional one-line ``caption`` in red on a band below it."""
+    if caption:
+        band = np.zeros((28, bgr.shape[1], 3), dtype=np.uint8)
+        cv2.putText(band, _ascii(caption)[:90], (6, 19), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (60, 60, 255), 1,
+                    cv2.LINE_AA)
+        bgr = np.vstack([bgr, band])
+    if not cv2.imwrite(str(path), bgr):
+        raise OSError(f"cannot write the image {path}")
+
+
 class VideoWriter:
     """BEV video of an episode: each frame is :func:`to_rgb` of a raster scaled ``scale`` x
     (nearest), with the instruction text (and an optional notice) in a band below and the speed
@@ -544,18 +556,27 @@ class VideoWriter:
     def _band_height(self) -> int:
         return 8 + 18 * self.TEXT_LINES
 
-    def add(self, raster: np.ndarray, text: str, notice: str = "", speed: float | None = None) -> None:
+    def add(self, raster: np.ndarray, text: str, notice: str = "", speed: float | None = None,
+            t: float | None = None) -> None:
         """Append one frame: raster (C, H, W) as from :meth:`BevRenderer.render`, the current
-        instruction ``text``, an optional ``notice`` and the ego ``speed`` (m/s)."""
+        instruction ``text``, an optional ``notice``, the ego ``speed`` (m/s) and the time
+        ``t`` (s)."""
         if self._closed:
             raise RuntimeError("VideoWriter is closed")
-        rgb = to_rgb(raster)
-        h, w = rgb.shape[:2]
+        h, w = raster.shape[1:]
         if self._size is None:
             self._size = (h, w)
             self._open(h, w)
         elif self._size != (h, w):
             raise ValueError(f"raster size {(h, w)} differs from the first frame's {self._size}")
+        self._writer.write(self.frame(raster, text, notice, speed, t))
+        self.frames += 1
+
+    def frame(self, raster: np.ndarray, text: str, notice: str = "", speed: float | None = None,
+              t: float | None = None) -> np.ndarray:
+        """One frame as :meth:`add` writes it: (H * scale + band, W * scale, 3) uint8, BGR."""
+        rgb = to_rgb(raster)
+        h, w = rgb.shape[:2]
         bev = cv2.resize(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), (w * self.scale, h * self.scale),
                          interpolation=cv2.INTER_NEAREST)
         band = np.zeros((self._band_height(), bev.shape[1], 3), dtype=np.uint8)
@@ -586,10 +607,11 @@ class VideoWriter:
             rows.append((ln if fits(ln) else cut(ln), (0, 220, 255)))
         for i, (ln, colour) in enumerate(rows):
             cv2.putText(band, ln, (6, 20 + 18 * i), font, fscale, colour, 1, cv2.LINE_AA)
-        if speed is not None:
-            cv2.putText(bev, f"{speed:5.1f} m/s", (6, 18), font, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
-        self._writer.write(np.ascontiguousarray(np.vstack([bev, band])))
-        self.frames += 1
+        corner = " ".join(x for x in (f"{t:6.1f} s" if t is not None else "",
+                                      f"{speed:5.1f} m/s" if speed is not None else "") if x)
+        if corner:
+            cv2.putText(bev, corner, (6, 18), font, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
+        return np.ascontiguousarray(np.vstack([bev, band]))
 
     def close(self) -> None:
         """Finish the file (idempotent)."""

@@ -21,10 +21,10 @@ from .vocab import EpisodeStatus, EventKind, Family, Termination
 
 # --------------------------------------------------------------------------- tables
 _HEADER = ("Agent", "Family", "DS", "RC", "IS", "ΔDS [95% CI]", "ΔRC [95% CI]", "ΔIS", "worst ΔDS",
-           "RD %", "TO %")
+           "RD %", "TO %", "n", "crashed")
 _CSV_HEADER = ("agent", "family", "n", "n_routes", "DS", "RC", "IS", "dDS", "dDS_ci95_lo", "dDS_ci95_hi",
                "dRC", "dRC_ci95_lo", "dRC_ci95_hi", "dIS", "worst_dDS", "RD_pct", "TO_pct",
-               "baseline_done_variant_failed")
+               "baseline_done_variant_failed", "n_crashed", "unpaired", "base_DS", "base_RC", "base_IS")
 
 
 def _rows(summary: dict) -> list[tuple[str, str, dict]]:
@@ -63,7 +63,20 @@ def _cells(fam: str, b: dict, none: str) -> list[str]:
             _num(b["dIS"], 3, True, none),
             _num(b["worst_dDS"], 1, True, none),
         ]
-    return cells + [_pct(b["RD"], none), _pct(b["TO"], none)]
+    return cells + [_pct(b["RD"], none), _pct(b["TO"], none), str(b["n"]), str(b.get("n_crashed", 0))]
+
+
+def crash_note(summary: dict) -> str:
+    """The line under a table that says what crashed episodes did to it ("" when none did)."""
+    crashed = summary["episodes"]["crashed"]
+    if not crashed:
+        return ""
+    unpaired = sum(f.get("unpaired", 0) for a in summary["agents"].values() for f in a["families"].values())
+    also = (f"; {unpaired} finished variant episodes whose baseline crashed are left out too"
+            if unpaired else "")
+    return (f"{crashed} episode{'s' * (crashed != 1)} crashed and {'are' if crashed != 1 else 'is'} left "
+            f"out: each family's row covers only its complete pairs (variant and baseline both finished; "
+            f"n counts them){also}. `icrsumo evaluate --retry-crashed` runs the crashed ones again.")
 
 
 _TEX_SPECIAL = {"\\": r"\textbackslash{}", "~": r"\textasciitilde{}", "^": r"\^{}",
@@ -94,9 +107,12 @@ def tables(summary: dict) -> dict[str, str]:
     RD/TO in % of the family's episodes; CSV has the unrounded summary numbers."""
     rows = _rows(summary)
 
-    md = ["| " + " | ".join(_HEADER) + " |", "|" + "|".join(["---"] * 2 + ["---:"] * 9) + "|"]
+    md = ["| " + " | ".join(_HEADER) + " |", "|" + "|".join(["---"] * 2 + ["---:"] * 11) + "|"]
     for agent, fam, b in rows:
         md.append("| " + " | ".join([agent, fam] + _cells(fam, b, "—")) + " |")
+    note = crash_note(summary)
+    if note:
+        md += ["", note]
 
     csv_rows = []
     for agent, fam, b in rows:
@@ -109,12 +125,14 @@ def tables(summary: dict) -> dict[str, str]:
             b.get("worst_dDS"),
             None if b["RD"] is None else round(100.0 * b["RD"], 2),
             None if b["TO"] is None else round(100.0 * b["TO"], 2),
-            None if base else b["baseline_done_variant_failed"],
+            None if base else b["baseline_done_variant_failed"], b.get("n_crashed", 0),
+            None if base else b.get("unpaired", 0), None if base else b.get("base_DS"),
+            None if base else b.get("base_RC"), None if base else b.get("base_IS"),
         ])
 
     tex_head = ["Agent", "Family", "DS", "RC", "IS", r"$\Delta$DS [95\% CI]", r"$\Delta$RC [95\% CI]",
-                r"$\Delta$IS", r"worst $\Delta$DS", r"RD \%", r"TO \%"]
-    tex = [r"\begin{tabular}{ll" + "r" * 9 + "}", r"\toprule", " & ".join(tex_head) + r" \\", r"\midrule"]
+                r"$\Delta$IS", r"worst $\Delta$DS", r"RD \%", r"TO \%", "n", "crashed"]
+    tex = [r"\begin{tabular}{ll" + "r" * 11 + "}", r"\toprule", " & ".join(tex_head) + r" \\", r"\midrule"]
     prev = None
     for agent, fam, b in rows:
         if prev is not None and agent != prev:
@@ -124,6 +142,8 @@ def tables(summary: dict) -> dict[str, str]:
         tex.append(" & ".join(cells) + r" \\")
         prev = agent
     tex += [r"\bottomrule", r"\end{tabular}"]
+    if note:
+        tex.append("% " + note)
 
     return {"md": "\n".join(md) + "\n", "csv": _csv_text(_CSV_HEADER, csv_rows), "tex": "\n".join(tex) + "\n"}
 

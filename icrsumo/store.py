@@ -12,7 +12,7 @@ import json
 import math
 import sqlite3
 import zlib
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator, Mapping
 from dataclasses import asdict, fields
 from pathlib import Path
 
@@ -26,7 +26,7 @@ CREATE TABLE IF NOT EXISTS episodes (
     agent TEXT NOT NULL, route_id TEXT NOT NULL, family TEXT NOT NULL, k INTEGER NOT NULL,
     seed INTEGER NOT NULL, status TEXT NOT NULL, ds REAL, rc REAL, is_ REAL, termination TEXT,
     termination_class TEXT, infractions TEXT, length REAL, duration REAL, attempts INTEGER,
-    message TEXT, log BLOB, outside_m REAL DEFAULT 0,
+    message TEXT, log BLOB, outside_m REAL DEFAULT 0, fingerprint TEXT DEFAULT '',
     PRIMARY KEY (agent, route_id, family, k, seed)
 );
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -59,9 +59,11 @@ class ResultStore:
             self._db.execute("PRAGMA synchronous=FULL")
             self._db.executescript(_SCHEMA)
             self._db.commit()
-            #: the episodes table's columns (a store written before ``outside_m`` lacks it until
-            #: the first write adds it)
+            #: the episodes table's columns (a store written before ``outside_m`` or
+            #: ``fingerprint`` lacks them until the first write adds them)
             self._cols = {r[1] for r in self._db.execute("PRAGMA table_info(episodes)")}
+        #: agent name -> fingerprint of the agents this run drives (:meth:`claim_agents`)
+        self._claimed: dict[str, str] = {}
 
     @staticmethod
     def check(path: Path) -> None:
@@ -101,17 +103,70 @@ class ResultStore:
             self._db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES (?, ?)", (key, value))
             self._db.commit()
 
+    # ----------------------------------------------------------------- agent identity
+    def agent_fingerprints(self) -> dict[str, set[str]]:
+        """Agent name -> the fingerprints its stored episodes carry ("" for episodes stored
+        before icrsumo kept fingerprints)."""
+        if "fingerprint" not in self._cols:
+            with self._guard("reading"):
+                return {a: {""} for (a,) in self._db.execute("SELECT DISTINCT agent FROM episodes")}
+        out: dict[str, set[str]] = {}
+        with self._guard("reading"):
+            for agent, fp in self._db.execute("SELECT DISTINCT agent, fingerprint FROM episodes"):
+                out.setdefault(agent, set()).add(fp or "")
+        return out
+
+    def check_agents(self, fingerprints: Mapping[str, str], replace: Collection[str] = ()) -> list[str]:
+        """An InputError when an agent of ``fingerprints`` (name -> fingerprint) has stored
+        episodes of another fingerprint and is not in ``replace``; returns the names whose
+        stored episodes carry no fingerprint (stored by an icrsumo before fingerprints)."""
+        from .agents.identity import short
+
+        unmarked = []
+        stored = self.agent_fingerprints()
+        for name, fp in fingerprints.items():
+            old = stored.get(name, set())
+            other = sorted(old - {fp, ""})
+            if other and name not in replace:
+                raise InputError(self.path, f"agent {name}", f"holds episodes of another agent of that name "
+                                 f"(fingerprint {short(other[0])}; the agent given now is {short(fp)})",
+                                 f"use another --out folder, or --replace-agent {name} to delete that "
+                                 f"agent's stored episodes and run it again")
+            if "" in old and name not in replace:
+                unmarked.append(name)
+        return unmarked
+
+    def claim_agents(self, fingerprints: Mapping[str, str], replace: Collection[str] = ()) -> list[str]:
+        """Check (:meth:`check_agents`), delete the stored episodes of the agents in ``replace``
+        that another agent of the name drove, and stamp every episode :meth:`put` stores from now
+        on with its agent's fingerprint; returns the names of agents whose stored episodes carry
+        no fingerprint."""
+        unmarked = self.check_agents(fingerprints, replace)
+        with self._guard("writing"):
+            self._add_columns()
+            for name in replace:  # the rows of this very agent (a resumed replacing run) stay
+                self._db.execute("DELETE FROM episodes WHERE agent = ? AND fingerprint IS NOT ?",
+                                 (name, fingerprints.get(name, "")))
+            self._db.commit()
+        self._claimed = dict(fingerprints)
+        return unmarked
+
+    def _add_columns(self) -> None:
+        for col, decl in (("outside_m", "REAL DEFAULT 0"), ("fingerprint", "TEXT DEFAULT ''")):
+            if col not in self._cols:
+                self._db.execute(f"ALTER TABLE episodes ADD COLUMN {col} {decl}")
+                self._cols.add(col)
+
     # ----------------------------------------------------------------- episodes
     def put(self, rec: EpisodeRecord, log_json: str | None = None) -> None:
         """Store one finished episode and commit at once."""
         row = asdict(rec)
         row["infractions"] = json.dumps([list(i) for i in rec.infractions])
         row["log"] = zlib.compress(log_json.encode("utf-8"), 6) if log_json else None
-        cols = _COLUMNS + ["log"]
+        row["fingerprint"] = self._claimed.get(rec.agent, "")
+        cols = _COLUMNS + ["log", "fingerprint"]
         with self._guard("writing"):
-            if "outside_m" not in self._cols:
-                self._db.execute("ALTER TABLE episodes ADD COLUMN outside_m REAL DEFAULT 0")
-                self._cols.add("outside_m")
+            self._add_columns()
             self._db.execute(
                 f"INSERT OR REPLACE INTO episodes ({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})",
                 [row[c] for c in cols],

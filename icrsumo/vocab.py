@@ -96,6 +96,15 @@ FAMILIES: tuple[Family, ...] = (Family.PARAPHRASE, Family.AMBIGUITY, Family.NOIS
 CONTROL_FAMILIES: tuple[Family, ...] = (Family.BLANK, Family.SHUFFLED)
 #: every counterfactual family, in their canonical order (the paper's four, then the controls)
 ALL_FAMILIES: tuple[Family, ...] = FAMILIES + CONTROL_FAMILIES
+#: one line per selectable family (``icrsumo list families``)
+FAMILY_DESCRIPTIONS: dict[Family, str] = {
+    Family.PARAPHRASE: "the same maneuver, worded otherwise (goal kept)",
+    Family.AMBIGUITY: "the direction left out or vague (goal kept, harder to resolve)",
+    Family.NOISE: "typos, case and punctuation noise (goal kept)",
+    Family.MISLEADING: "a directive that contradicts the route (goal-conflicting)",
+    Family.BLANK: "control: no instruction text at all",
+    Family.SHUFFLED: "control: each instruction replaced by one of another maneuver",
+}
 
 
 def variants_of(family: str, k: int) -> int:

@@ -21,7 +21,8 @@ def test_hand_computed_tiny_example():
     assert list(s["agents"]["A"]["families"]) == ["paraphrase", "misleading"]
 
     a_base = s["agents"]["A"]["baseline"]
-    assert a_base == {"DS": 63.3333, "RC": 86.6667, "IS": 0.766667, "RD": 0.0, "TO": 0.3333, "n": 3}
+    assert a_base == {"DS": 63.3333, "RC": 86.6667, "IS": 0.766667, "RD": 0.0, "TO": 0.3333, "n": 3,
+                      "n_crashed": 0}
     p = s["agents"]["A"]["families"]["paraphrase"]
     assert (p["DS"], p["RC"], p["IS"]) == (50.0, 73.3333, 0.75)
     assert (p["dDS"], p["dRC"], p["dIS"]) == (-13.3333, -13.3333, -0.016667)
@@ -29,14 +30,19 @@ def test_hand_computed_tiny_example():
     assert (p["RD"], p["TO"], p["n"], p["n_routes"]) == (0.1667, 0.3333, 6, 3)
     assert p["baseline_done_variant_failed"] == 1  # r1 only: r2's baseline timed out
 
-    # B: baseline r2 and misleading r1/k1 crashed -> out of every mean; r2's variants unpaired
+    # B: baseline r2 and misleading r1/k1 crashed -> out of every mean; r2's variants are
+    # unpaired and left out too: every number covers the complete pairs r1/k0, r3/k0, r3/k1
     b_base = s["agents"]["B"]["baseline"]
-    assert (b_base["DS"], b_base["RC"], b_base["IS"], b_base["n"]) == (95.0, 100.0, 0.95, 2)
+    assert (b_base["DS"], b_base["RC"], b_base["IS"]) == (95.0, 100.0, 0.95)
+    assert (b_base["n"], b_base["n_crashed"]) == (2, 1)
     m = s["agents"]["B"]["families"]["misleading"]
-    assert (m["DS"], m["RC"], m["IS"], m["n"]) == (43.0, 46.0, 0.96, 5)
+    assert (m["DS"], m["RC"], m["IS"], m["n"]) == (51.6667, 56.6667, 0.933333, 3)  # (20+90+45)/3, ...
+    assert (m["base_DS"], m["base_RC"], m["base_IS"]) == (93.3333, 100.0, 0.933333)  # (100+90+90)/3
     assert (m["dDS"], m["dRC"], m["dIS"]) == (-41.6667, -43.3333, 0.0)
+    assert m["dDS"] == pytest.approx(m["DS"] - m["base_DS"], abs=1e-3)  # the means and the delta agree
     assert m["worst_dDS"] == -62.5  # mean(-80, -45)
-    assert (m["RD"], m["TO"], m["n_routes"]) == (0.6, 0.2, 2)
+    assert (m["RD"], m["TO"], m["n_routes"]) == (0.6667, 0.0, 2)
+    assert (m["n_crashed"], m["unpaired"], m["n_pairs"]) == (1, 2, 3)
     assert m["baseline_done_variant_failed"] == 2
 
     # a family without episodes: None, never NaN
@@ -53,10 +59,11 @@ def test_schema_keys():
     assert set(s["episodes"]) == {"done", "crashed"}
     for a in s["agents"].values():
         assert set(a) == {"baseline", "families"}
-        assert set(a["baseline"]) == {"DS", "RC", "IS", "RD", "TO", "n"}
+        assert set(a["baseline"]) == {"DS", "RC", "IS", "RD", "TO", "n", "n_crashed"}
         for f in a["families"].values():
             assert {"DS", "RC", "IS", "dDS", "dRC", "dIS", "worst_dDS", "dDS_ci95", "dRC_ci95", "RD", "TO",
-                    "n", "n_routes", "baseline_done_variant_failed"} <= set(f)
+                    "n", "n_routes", "baseline_done_variant_failed", "n_crashed", "unpaired", "base_DS",
+                    "base_RC", "base_IS"} <= set(f)
     ci = s["agents"]["A"]["families"]["paraphrase"]["dDS_ci95"]
     assert isinstance(ci, list) and len(ci) == 2 and all(isinstance(v, float) for v in ci)
     assert isinstance(s["agents"]["A"]["baseline"]["n"], int)

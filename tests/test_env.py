@@ -135,3 +135,45 @@ def test_readme_gymnasium_example_runs(cache, tmp_path):
                           text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert re.search(r"return -?\d+\.\d  DS \d+\.\d  RC \d+\.\d", proc.stdout), proc.stdout
+
+
+class _Reader:
+    """An agent of the protocol that uses what the environment's helper must carry: the time,
+    the instruction, its id and the episode info (exact float32 values: the env's box is float32)."""
+
+    name = "gymnasium"  # the env's logs carry this agent name
+    privileged = False
+
+    def reset(self, info):
+        self.dt = info.control_dt
+
+    def act(self, obs):
+        slow = "left" in obs.instruction.lower() and obs.instruction_id >= 0 and obs.t > 5.0
+        target = 4.0 if slow else 6.0
+        return Action(control=Control(steer=0.0, throttle=0.5 if np.float32(obs.speed) < target else 0.0,
+                                      brake=0.25 if np.float32(obs.speed) > target + 1.0 else 0.0))
+
+
+def test_an_icrsumo_agent_drives_the_env_through_the_helpers_as_in_evaluate(cache):
+    from icrsumo.agents.base import EpisodeInfo
+    from icrsumo.env import to_observation
+
+    env = gym.make("icrsumo/ICRDrive-v0")
+    obs, info = env.reset()
+    assert isinstance(info["episode_info"], EpisodeInfo) and Path(info["net"]).is_file()
+    agent = _Reader()
+    agent.reset(info["episode_info"])
+    while True:
+        o = to_observation(obs, info)
+        inner = env.unwrapped._obs  # what the closed loop observed this step
+        assert (o.t, o.instruction, o.instruction_id, o.notice) == (inner.t, inner.instruction,
+                                                                    inner.instruction_id, inner.notice)
+        obs, _, terminated, truncated, info = env.step(env.unwrapped.agent_action(agent.act(o)))
+        if terminated or truncated:
+            break
+    log = env.unwrapped.episode_log()
+    env.close()
+    ref = run_episode(env.unwrapped.scenario, list(env.unwrapped.sets.values())[0], _Reader())
+    assert dumps_log(log) == dumps_log(ref)  # the env and the helpers are evaluate's closed loop
+    with pytest.raises(AgentError, match="takes control actions"):
+        env.unwrapped.agent_action(Action(waypoints=np.zeros((3, 2))))

@@ -73,9 +73,13 @@ def test_the_python_api_example_runs(tmp_path, converted, capsys):
     for name in ("config.json", "results.sqlite", "results.md", "results.csv", "results.tex", "episodes.csv",
                  "figures/rollout_tiny_003.png", "leaderboard/route-oracle_misleading.json"):
         assert (out / name).is_file(), name
-    assert json.loads((out / "config.json").read_text()) == {"suite": "tiny", "seed": 2026, "k": 1,
-                                                             "traffic": "normal", "scoring": "lb1",
-                                                             "converter": CONVERTER_VERSION}
+    config = json.loads((out / "config.json").read_text())
+    agents = config.pop("agents")
+    assert config == {"suite": "tiny", "seed": 2026, "k": 1, "traffic": "normal", "scoring": "lb1",
+                      "converter": CONVERTER_VERSION}
+    assert {n: a["spec"] for n, a in agents.items()} == {"route-oracle": "route-oracle",
+                                                         "instruction-follower": "instruction-follower"}
+    assert all(a["fingerprint"].startswith("sha256:") for a in agents.values())
 
     # a rerun finds everything stored: nothing runs, the same summary; not quiet, the table prints
     summary = (out / "summary.json").read_bytes()

@@ -43,14 +43,17 @@ def test_tables_md_csv_tex(summary):
     assert set(t) == {"md", "csv", "tex"}
     md = t["md"].splitlines()
     assert md[0].startswith("| Agent | Family | DS | RC | IS | ΔDS [95% CI] | ΔRC [95% CI] | ΔIS | worst ΔDS")
-    assert len(md) == 2 + 2 * 3  # header, rule, (baseline + 2 families) per agent
+    assert len(md) == 2 + 2 * 3 + 2  # header, rule, (baseline + 2 families) per agent, the crash note
+    assert md[-1].startswith("2 episodes crashed and are left out: each family's row covers only its "
+                             "complete pairs")
+    assert "2 finished variant episodes whose baseline crashed" in md[-1]
     row = next(line for line in md if line.startswith("| A | paraphrase |"))
     cells = [c.strip() for c in row.strip("|").split("|")]
     assert cells[2:5] == ["50.0", "73.3", "0.750"]
     assert cells[5].startswith("-13.3 [") and cells[7] == "-0.017" and cells[8] == "-23.3"
-    assert cells[9:] == ["16.7", "33.3"]
+    assert cells[9:] == ["16.7", "33.3", "6", "0"]
     base = next(line for line in md if line.startswith("| B | baseline |"))
-    assert "| 95.0 | 100.0 | 0.950 | — | — | — | — | 0.0 | 0.0 |" in base
+    assert "| 95.0 | 100.0 | 0.950 | — | — | — | — | 0.0 | 0.0 | 2 | 1 |" in base
     assert "| A | misleading | — |" in t["md"]
 
     rows = list(csv.DictReader(io.StringIO(t["csv"])))
@@ -58,7 +61,8 @@ def test_tables_md_csv_tex(summary):
         ("A", "baseline"), ("A", "paraphrase"), ("A", "misleading"),
         ("B", "baseline"), ("B", "paraphrase"), ("B", "misleading")]
     m = rows[5]
-    assert float(m["dDS"]) == -41.6667 and float(m["worst_dDS"]) == -62.5 and float(m["RD_pct"]) == 60.0
+    assert float(m["dDS"]) == -41.6667 and float(m["worst_dDS"]) == -62.5 and float(m["RD_pct"]) == 66.67
+    assert (m["n"], m["n_crashed"], m["unpaired"], float(m["base_DS"])) == ("3", "1", "2", 93.3333)
     ci = summary["agents"]["B"]["families"]["misleading"]["dDS_ci95"]
     assert (float(m["dDS_ci95_lo"]), float(m["dDS_ci95_hi"])) == tuple(ci)
     assert rows[2]["DS"] == "" and rows[0]["dDS"] == ""

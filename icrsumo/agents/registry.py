@@ -107,8 +107,9 @@ register("instruction-follower", InstructionFollower,
 # learned agents whose checkpoints ship with the package (torch loads on first use)
 for _cls in (TokenAgent, NgramAgent, NgramAugAgent):
     if (CHECKPOINTS / _cls.checkpoint).is_file():
-        register(_cls.name, _cls, description=(_cls.__doc__ or "").strip().splitlines()[0])
-del _cls
+        _doc = (_cls.__doc__ or "").strip().splitlines()[0].removeprefix(f"``{_cls.name}``: ")
+        register(_cls.name, _cls, description=f"learned: {_doc.replace('``', '')}")
+del _cls, _doc
 
 #: the agent `icrsumo evaluate` uses when none is named: the shipped learned agent whose text
 #: encoder was trained with the training bank's paraphrases and noise (README, Learned agents)
@@ -207,6 +208,77 @@ def agent_factory(spec: str, device: str | None = None) -> Callable[[], Agent]:
     if device is not None and takes_device(factory):
         return OnDevice(factory, device)
     return factory
+
+
+#: prefix of the label an agent given as a Python object (class, function, instance) runs under
+PYTHON_PREFIX = "python:"
+
+
+@dataclass(frozen=True)
+class InstanceFactory:
+    """A factory of fresh copies of one agent instance (a deep copy per episode, so every
+    episode starts from the instance as given). ``name``, ``privileged``, ``needs_route`` are
+    the instance's; ``agent_class`` is its class. Picklable when the instance is."""
+
+    instance: Any
+
+    def __call__(self) -> Agent:
+        import copy
+
+        return copy.deepcopy(self.instance)
+
+    @property
+    def agent_class(self) -> Any:
+        return type(self.instance)
+
+    def __getattr__(self, attr: str) -> Any:  # name, privileged, needs_route, fingerprint, ...
+        if attr.startswith("__") or attr == "instance":
+            raise AttributeError(attr)
+        return getattr(self.instance, attr)
+
+
+@dataclass(frozen=True)
+class FunctionFactory:
+    """A function that makes agents, with what one agent it made tells: ``name``,
+    ``agent_class``, ``privileged``, ``needs_route``. Picklable when the function is."""
+
+    fn: Callable[[], Agent]
+    name: str
+    agent_class: type
+    privileged: bool = False
+    needs_route: bool = False
+
+    def __call__(self) -> Agent:
+        return self.fn()
+
+
+def python_agent(obj: object, where: str = "agents") -> tuple[str, Callable[..., Agent]]:
+    """(label, factory) of an agent given as a Python object: an agent class or a zero-argument
+    function making agents (the factory), or an agent instance (copied per episode). The label
+    ``python:module.Qualname`` stands for it where a spec would (an unnamed agent's results are
+    stored under it). An InputError naming ``where`` for anything else."""
+    if isinstance(obj, type) or (callable(obj) and not callable(getattr(obj, "act", None))):
+        factory: Callable[..., Agent] = obj  # type: ignore[assignment]
+        cls = obj
+        if not isinstance(obj, type):  # a function: one agent made now tells its name and class
+            try:
+                probe = obj()
+            except Exception as err:  # noqa: BLE001 - the user's function failed
+                raise InputError(where, _qualname(obj), f"the agent function raised {type(err).__name__}: "
+                                 f"{err}", "make it return an agent") from None
+            cls = type(probe)
+            factory = FunctionFactory(obj, agent_name(_qualname(obj), probe), cls,
+                                      bool(getattr(probe, "privileged", False)),
+                                      bool(getattr(probe, "needs_route", False)))
+        missing = [m for m in ("reset", "act") if not callable(getattr(cls, m, None))]
+        if missing:
+            raise InputError(where, _qualname(obj), f"does not make agents of the agent protocol (missing "
+                             f"{', '.join(missing)})", "add reset(info) and act(obs) -> Action")
+        return f"{PYTHON_PREFIX}{_qualname(obj)}", factory
+    if callable(getattr(obj, "act", None)) and callable(getattr(obj, "reset", None)):
+        return f"{PYTHON_PREFIX}{_qualname(type(obj))} instance", InstanceFactory(obj)
+    raise InputError(where, repr(obj)[:60], "is not an agent", "give an agent spec (a string), an agent "
+                     "class, a function that makes agents, or an agent instance (with reset and act)")
 
 
 def agent_name(spec: str, agent: object) -> str:

@@ -9,7 +9,9 @@ remote:http://HOST:PORT`` drives it. Every body is a JSON object carrying
 =====================  ==========================================  ==================================
 request                body                                        answer (200)
 =====================  ==========================================  ==================================
-``GET /info``          —                                           ``name``, ``privileged`` (false),
+``GET /info``          —                                           ``name``, ``fingerprint`` (what the
+                                                                   agent is: ``sha256:`` + 64 hex digits,
+                                                                   optional), ``privileged`` (false),
                                                                    ``batching``, ``max_batch``, ``stats``
 ``POST /reset``        ``session`` (client-chosen id), ``info``     ``{}``: a fresh agent instance for
                        (EpisodeInfo fields)                        the session, reset with ``info``
@@ -302,6 +304,10 @@ class RemoteFactory:
                              "serve the agent with icrsumo serve-agent")
         self.name = name
         self.info = info
+        fp = info.get("fingerprint")
+        #: the server's own account of its agent (``GET /info``'s ``fingerprint``); a server that
+        #: gives none is known by its agent's name and address only
+        self.fingerprint = fp if isinstance(fp, str) and fp.strip() else f"remote {name} at {url}"
 
     def __call__(self) -> RemoteAgent:
         return RemoteAgent(self.url, self.name, self.timeout)

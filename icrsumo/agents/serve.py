@@ -27,6 +27,7 @@ from typing import Any
 from ..devices import check_device
 from ..errors import InputError
 from .batching import BatchingCore, Task
+from .identity import fingerprint
 from .registry import agent_factory, agent_name
 from .remote import PROTOCOL, ProtocolError, decode_info, decode_obs, encode_action, message
 
@@ -46,6 +47,8 @@ class AgentServer(BatchingCore):
                              "view, which is not sent over the network", "serve a non-privileged agent")
         super().__init__(factory, max_batch, max_sessions, name=agent_name(spec, factory))
         self.spec = spec
+        #: the served agent's identity (:mod:`icrsumo.agents.identity`), reported by ``GET /info``
+        self.fingerprint = fingerprint(factory)
         self._queue: queue.Queue[Task | None] = queue.Queue()
         self._worker = threading.Thread(target=self._work, name="icrsumo-agent-worker", daemon=True)
         self._worker.start()
@@ -68,8 +71,9 @@ class AgentServer(BatchingCore):
         return f"http://{self.host}:{self.port}"
 
     def info(self) -> dict[str, Any]:
-        return {"name": self.name, "privileged": False, "batching": self.batch_hook,
-                "max_batch": self.max_batch, "sessions": len(self.sessions), "stats": dict(self.stats)}
+        return {"name": self.name, "fingerprint": self.fingerprint, "privileged": False,
+                "batching": self.batch_hook, "max_batch": self.max_batch, "sessions": len(self.sessions),
+                "stats": dict(self.stats)}
 
     def serve_forever(self) -> None:
         self.httpd.serve_forever(poll_interval=0.2)

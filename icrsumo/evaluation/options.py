@@ -59,6 +59,8 @@ class EvalOptions:
     #: the scoring rules (``--scoring``): a name of :data:`icrsumo.metrics.SCORINGS`; part of the
     #: out folder's configuration
     scoring: str = "lb1"
+    #: agent names whose stored episodes (of another fingerprint) are deleted and run again
+    replace_agents: tuple[str, ...] = ()
 
     def check(self) -> None:
         """InputErrors for bad values (agent specs are checked when they are resolved)."""

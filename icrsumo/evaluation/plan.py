@@ -88,6 +88,8 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None)
                 fix = (f"use another --out folder, or --scoring {old.get('scoring')}; icrsumo report OUT "
                        f"--scoring {opts.scoring} rescores the stored episodes")
             raise InputError(out, "config.json", f"holds results of a different configuration: {shown}", fix)
+        if isinstance(old.get("agents"), dict):
+            config["agents"] = dict(old["agents"])
     if bank is not None:
         config.update(baseline_bank_sha256=bank.sha256, baseline_bank_file=str(bank.path))
     return config
@@ -106,17 +108,20 @@ def _resolve_suite(opts: EvalOptions, out: Path) -> tuple[Path, list[str]]:
     return target, list(report.failures)
 
 
-def prepare_suite(opts: EvalOptions) -> PreparedSuite:
+def prepare_suite(opts: EvalOptions, agents: Mapping[str, dict] | None = None) -> PreparedSuite:
     """Check the out folder's configuration, convert the suite into OUT/scenarios (a
     convert-routes folder is used as it is), generate the instructions of every family into
     OUT/instructions (both reused when present), check ``--routes`` and ``--rollout-route``
-    against the suite, and only then write OUT/config.json. Skipped routes are returned
+    against the suite, and only then write OUT/config.json (with ``agents``, name -> its
+    fingerprint and spec, merged into the agents it names already). Skipped routes are returned
     (``skipped``: one line each) for the caller to name.
     When anything is refused, an out folder this call created is removed again: a refused run
     leaves nothing behind (and never a config.json that locks the folder)."""
     out = Path(opts.out)
     bank = load_baseline_bank(opts.baseline_bank) if opts.baseline_bank is not None else None
     config = check_config(out, opts, bank)
+    if agents:
+        config["agents"] = {**config.get("agents", {}), **agents}
     before = OutFolder.before(out)
     try:
         scenarios, skipped = _resolve_suite(opts, out)

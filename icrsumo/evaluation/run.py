@@ -9,7 +9,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ..agents.registry import DEFAULT_AGENT, agent_factory, agent_name
+from ..agents.registry import DEFAULT_AGENT, PYTHON_PREFIX, agent_factory, agent_name, python_agent
 from ..errors import InputError, check_seed, expect
 from ..fsio import read_json
 from ..instructions.families import ALL_FAMILIES, FAMILIES
@@ -49,10 +49,92 @@ class EvalResult:
     inference: Mapping[str, dict] = field(default_factory=dict)
 
 
-def resolve_agents(specs: tuple[str, ...]) -> dict[str, Callable]:
+def resolve_agents(specs: tuple) -> dict[str, Callable]:
     """Spec -> agent factory for every spec (imports user code, asks remote agents for their
-    name); InputErrors for bad specs."""
-    return {spec: agent_factory(spec) for spec in dict.fromkeys(specs)}
+    name); InputErrors for bad specs. An agent given as a Python object (a class, a function
+    making agents, an instance: the Python API) is keyed by its label
+    (:func:`icrsumo.agents.registry.python_agent`)."""
+    out: dict[str, Callable] = {}
+    for i, spec in enumerate(specs):
+        if isinstance(spec, str):
+            out.setdefault(spec, agent_factory(spec))
+        else:
+            label, factory = python_agent(spec, f"agents[{i}]")
+            out.setdefault(label, factory)
+    return out
+
+
+def with_factories(jobs: list[Job], factories: Mapping[str, Callable]) -> list[Job]:
+    """``jobs`` whose agent was given as a Python object carry its factory (the workers cannot
+    build it from a spec)."""
+    return [replace(j, factory=factories[j.agent_spec]) if j.agent_spec.startswith(PYTHON_PREFIX) else j
+            for j in jobs]
+
+
+@dataclass(frozen=True)
+class AgentIds:
+    """The agents of one run: ``names`` (spec -> the name its episodes are stored under) and
+    ``fingerprints`` (name -> :func:`icrsumo.agents.identity.fingerprint`); ``specs``: one spec
+    per name, in the order given (two specs of one agent run once)."""
+
+    names: Mapping[str, str]
+    fingerprints: Mapping[str, str]
+    specs: tuple[str, ...]
+
+    def config(self) -> dict[str, dict[str, str]]:
+        """The ``agents`` entry of OUT/config.json: name -> fingerprint and the spec that rebuilds
+        the agent (an agent file's path made absolute)."""
+        out = {}
+        for spec in self.specs:
+            name, shown = self.names[spec], spec
+            target, sep, cls = spec.rpartition(":")
+            if sep and target.endswith(".py") and not spec.startswith("remote:"):
+                shown = f"{Path(target).resolve()}:{cls}"
+            out[name] = {"fingerprint": self.fingerprints[name], "spec": shown}
+        return out
+
+
+def identify_agents(factories: Mapping[str, Callable], replacing: tuple[str, ...] = ()) -> AgentIds:
+    """Names and fingerprints of resolved agents; an InputError when two different agents
+    (other fingerprints) share a name, or when ``replacing`` names no agent of the run."""
+    from ..agents.identity import fingerprint, short
+
+    names: dict[str, str] = {}
+    fps: dict[str, str] = {}
+    first: dict[str, str] = {}
+    for spec, factory in factories.items():
+        name = names[spec] = agent_name(spec, factory)
+        fp = fingerprint(factory)
+        if name in fps and fps[name] != fp:
+            raise InputError("--agent", spec, f"is named {name!r}, as {first[name]} is, but is another agent "
+                             f"(fingerprint {short(fp)}, not {short(fps[name])})",
+                             "give one of them another name (the class's name attribute), or evaluate them "
+                             "into separate --out folders")
+        fps.setdefault(name, fp)
+        first.setdefault(name, spec)
+    for name in replacing:
+        if name not in fps:
+            raise InputError("--replace-agent", name, "is not an agent of this run",
+                             f"name one of {', '.join(sorted(fps))}")
+    return AgentIds(names, fps, tuple(first.values()))
+
+
+def check_agents(store_path: Path, ids: AgentIds, replacing: tuple[str, ...]) -> None:
+    """An InputError when the store at ``store_path`` (if any) holds episodes of another agent
+    under one of ``ids``' names (see :meth:`ResultStore.check_agents`); nothing is written."""
+    ResultStore.check(store_path)
+    if store_path.exists():
+        with ResultStore(store_path, verify=False) as store:
+            store.check_agents(ids.fingerprints, replacing)
+
+
+def claim_agents(store: ResultStore, ids: AgentIds, replacing: tuple[str, ...]) -> None:
+    """Claim the run's agents in ``store`` (replacing those in ``replacing``) and say on stderr
+    which agents' stored episodes predate fingerprints (they are taken as the agent's)."""
+    for name in store.claim_agents(ids.fingerprints, replacing):
+        print(f"icrsumo: note: the stored episodes of {name} were stored before icrsumo kept agent "
+              f"fingerprints; they are taken as this agent's (--replace-agent {name} runs them again)",
+              file=sys.stderr)
 
 
 def run_evaluation(opts: EvalOptions) -> EvalResult:
@@ -60,13 +142,17 @@ def run_evaluation(opts: EvalOptions) -> EvalResult:
     is written (options, agents, the out folder's configuration and store, the suite)."""
     opts.check()
     factories = resolve_agents(opts.agents)
-    names = {spec: agent_name(spec, f) for spec, f in factories.items()}
+    ids = identify_agents(factories, opts.replace_agents)
+    opts = replace(opts, agents=ids.specs)
+    names = ids.names
     out = Path(opts.out)
-    ResultStore.check(out / "results.sqlite")
-    prep = prepare_suite(opts)
+    check_agents(out / "results.sqlite", ids, opts.replace_agents)
+    prep = prepare_suite(opts, ids.config())
     written = set(prep.routes)
-    jobs = [j for j in plan_jobs(opts, prep.scenarios, prep.instructions, names) if j.route_id in written]
+    jobs = with_factories([j for j in plan_jobs(opts, prep.scenarios, prep.instructions, names)
+                           if j.route_id in written], factories)
     with ResultStore(out / "results.sqlite", verify=False) as store:  # checked above
+        claim_agents(store, ids, opts.replace_agents)
         check_stored_routes(opts, store, set(names.values()), written, prep.skipped)
         for line in prep.skipped:
             print(f"icrsumo: skipped: {line}", file=sys.stderr)
@@ -132,11 +218,9 @@ def run_queue(queue: list[Job], opts: EvalOptions, store: ResultStore, progress:
         queue = retry
 
 
-def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> dict:
-    """Rebuild summary, tables and figures of an evaluation folder from its store (no SUMO);
-    returns the summary. With ``scoring`` (a name of :data:`icrsumo.metrics.SCORINGS`) every
-    finished episode is rescored from its stored log by those rules (the store is left as it
-    is; the summary names the scoring); without, the stored scores are reported."""
+def read_config(out: Path) -> dict:
+    """The checked configuration (OUT/config.json) of an evaluation folder that has a store; an
+    InputError when ``out`` is not one."""
     out = Path(out)
     cfg_path = out / "config.json"
     for need in (cfg_path, out / "results.sqlite"):
@@ -153,6 +237,17 @@ def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> d
     if not 1 <= cfg["k"] <= 64:
         raise InputError(cfg_path, "k", f"{cfg['k']} is out of range (1 to 64)", fix)
     check_seed(cfg["seed"], f"{cfg_path}: seed")
+    return cfg
+
+
+def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> dict:
+    """Rebuild summary, tables and figures of an evaluation folder from its store (no SUMO);
+    returns the summary. With ``scoring`` (a name of :data:`icrsumo.metrics.SCORINGS`) every
+    finished episode is rescored from its stored log by those rules (the store is left as it
+    is; the summary names the scoring); without, the stored scores are reported."""
+    out = Path(out)
+    cfg_path = out / "config.json"
+    cfg = read_config(out)
     stored_scoring = cfg.get("scoring")
     if scoring is not None and scoring not in SCORINGS:
         raise InputError("--scoring", scoring, "unknown scoring", f"use {', '.join(scoring_names())}")

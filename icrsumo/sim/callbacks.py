@@ -166,7 +166,7 @@ class VideoRecorder(EpisodeCallback):
 
     def on_observation(self, episode: Episode, obs: Observation) -> None:
         if self._writer is not None:
-            self._writer.add(obs.bev, obs.instruction, obs.notice, obs.speed)
+            self._writer.add(obs.bev, obs.instruction, obs.notice, obs.speed, obs.t)
 
     def on_close(self, episode: Episode) -> None:
         if self._writer is not None:

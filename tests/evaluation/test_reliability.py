@@ -225,12 +225,17 @@ def test_retry_crashed_repairs_a_transient_fault_in_place(suite, tmp_path, monke
     argv = ["evaluate", "--suite", str(suite), "--agent", f"{AGENTS}:Flaky", "--family", "noise", "--k", "1",
             "--workers", "1", "--quiet", "--out", "o"]
     assert main(argv) == 0
-    assert "2 crashed (stored as crashed: rerun with --retry-crashed" in capsys.readouterr().err
+    assert "2 crashed (left out of every table, with their pairs; --retry-crashed" in capsys.readouterr().err
+    md = Path("o/results.md").read_text(encoding="utf-8")
+    assert "| flaky | baseline | — | — | — | — | — | — | — | — | — | 0 | 1 |" in md
+    assert "2 episodes crashed and are left out" in md
+    assert main([*argv, "--fail-on-crash"]) == 1  # for CI: a run with crashes fails
     os.remove("flaky.marker")
     assert main(argv) == 0  # a plain rerun keeps the crashes
     assert "0 episodes done, 2 crashed" in capsys.readouterr().err
-    assert main([*argv, "--retry-crashed"]) == 0
+    assert main([*argv, "--retry-crashed", "--fail-on-crash"]) == 0
     assert "2 episodes done, 0 crashed" in capsys.readouterr().err
+    assert "crashed and" not in Path("o/results.md").read_text(encoding="utf-8")
     with ResultStore(tmp_path / "o" / "results.sqlite") as s:
         assert {r.status for r in s.records()} == {"done"}
 

@@ -1,0 +1,191 @@
+"""``icrsumo show``: watch any stored episode. Re-simulates it from its out folder (scenario,
+instruction sequence, agent, seed), checks that the replay reproduces the stored log byte for
+byte, and writes the BEV video with the active instruction and notices overlaid plus a still of
+the moment the episode went wrong (its first infraction, else where it ended)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .agents.base import Observation
+from .convert import safe_name
+from .errors import InputError
+from .sim.callbacks import EpisodeCallback
+from .store import ResultStore
+from .types import EpisodeLog, EpisodeRecord
+from .vocab import EpisodeStatus, Family
+
+
+@dataclass(frozen=True)
+class ShowResult:
+    """What :func:`show_episode` wrote and found. ``video`` and ``still``: the files;
+    ``moment_t`` (s) and ``moment``: when and why the still was taken; ``identical``: the
+    replay's log equals the stored one byte for byte, else ``difference`` says where it first
+    differs; ``record``: the stored episode."""
+
+    record: EpisodeRecord
+    video: Path
+    still: Path
+    moment_t: float
+    moment: str
+    identical: bool
+    difference: str = ""
+
+
+def failure_moment(log: EpisodeLog, scoring: str) -> tuple[float, str]:
+    """When (s) and why an episode went wrong: its first penalised infraction, else its
+    termination (for a completed episode without infractions: its end)."""
+    from .metrics import score_episode
+
+    result = score_episode(log, scoring)
+    if result.infractions:
+        first = min(result.infractions, key=lambda i: i.t)
+        other = f" with {first.other}" if first.other else ""
+        return first.t, f"{first.kind}{other} at {first.pos:.0f} m along the route"
+    end = log.t[-1] if log.t else log.termination_t
+    where = f" at {log.progress[-1]:.0f} m of {log.route_length:.0f} m" if log.progress else ""
+    return end, f"{result.termination}{where}"
+
+
+def first_difference(a: EpisodeLog, b: EpisodeLog) -> str:
+    """Where two logs of one episode first differ, in words ("" when the compared fields agree)."""
+    for col in ("t", "x", "y", "yaw", "speed", "progress", "instruction"):
+        xa, xb = getattr(a, col), getattr(b, col)
+        for i, (u, v) in enumerate(zip(xa, xb)):
+            if u != v:
+                t = a.t[i] if i < len(a.t) else float("nan")
+                return f"{col} first differs at step {i} (t = {t:.1f} s: {u!r} stored, {v!r} now)"
+        if len(xa) != len(xb):
+            return f"the stored log has {len(xa)} steps, the replay {len(xb)}"
+    if a.termination != b.termination:
+        return f"the termination differs ({a.termination} stored, {b.termination} now)"
+    return "the event lists or the scores' inputs differ"
+
+
+class _Recorder(EpisodeCallback):
+    """Writes the video and keeps the frame of the last observation at or before ``moment_t``."""
+
+    def __init__(self, video: Path, moment_t: float) -> None:
+        from .render import VideoWriter
+
+        self.writer = VideoWriter(video)
+        self.moment_t = moment_t
+        self.still: np.ndarray | None = None
+
+    def on_observation(self, episode, obs: Observation) -> None:
+        self.writer.add(obs.bev, obs.instruction, obs.notice, obs.speed, obs.t)
+        if self.still is None or obs.t <= self.moment_t + 1e-9:
+            self.still = self.writer.frame(obs.bev, obs.instruction, obs.notice, obs.speed, obs.t)
+
+    def on_close(self, episode) -> None:
+        self.writer.close()
+
+
+def _find(store: ResultStore, agent: str, route: str, family: str, k: int, seed: int) -> EpisodeRecord:
+    recs = [r for r in store.records() if r.seed == seed]
+    for r in recs:
+        if (r.agent, r.route_id, str(r.family), r.k) == (agent, route, family, k):
+            return r
+    if not recs:
+        raise InputError(store.path, "", "holds no episodes", "run icrsumo evaluate into this folder first")
+    for what, have, value in (("--agent", {r.agent for r in recs}, agent),
+                              ("--route", {r.route_id for r in recs}, route),
+                              ("--family", {str(r.family) for r in recs}, family)):
+        if value not in have:
+            shown = ", ".join(sorted(have)[:8]) + (", ..." if len(have) > 8 else "")
+            raise InputError(what, value, "no stored episode has it", f"use one of {shown}")
+    ks = sorted({r.k for r in recs if (r.agent, r.route_id, str(r.family)) == (agent, route, family)})
+    raise InputError("--k", str(k), f"no stored episode of {agent} on {route} in {family} has it",
+                     f"use one of {', '.join(map(str, ks))}" if ks else "pick another family or route")
+
+
+def _instructions(out: Path, rec: EpisodeRecord) -> Path:
+    if rec.family == Family.ATTACK:
+        found = sorted((out / "attack").glob(f"*/{safe_name(rec.agent)}/{safe_name(rec.route_id)}.json"))
+        if found:
+            return found[0]
+    path = out / "instructions" / f"{safe_name(rec.route_id)}.json"
+    if not path.is_file():
+        raise InputError(path, "", "the episode's instruction file is missing",
+                         "restore the out folder's instructions/ (icrsumo evaluate writes them)")
+    return path
+
+
+def _scenario(out: Path, cfg: dict, route: str):
+    from .scenario import find_scenarios, read_scenario
+
+    root = out / "scenarios" if (out / "scenarios").is_dir() else Path(cfg["suite"])
+    guess = root / "scenarios" / safe_name(route)
+    if (guess / "scenario.json").is_file():
+        sc = read_scenario(guess)
+        if sc.route_id == route:
+            return sc
+    if (root / "index.json").is_file():
+        for d in find_scenarios(root):
+            sc = read_scenario(d)
+            if sc.route_id == route:
+                return sc
+    raise InputError(root, route, "the episode's scenario is missing",
+                     "restore the out folder's scenarios/ (icrsumo evaluate converts them there)")
+
+
+def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: Path | None = None,
+                 spec: str | None = None) -> ShowResult:
+    """Re-simulate one stored episode of the evaluation folder ``out`` and write
+    ``dest/episode.mp4`` (``.avi`` where this OpenCV cannot write mp4) and ``dest/moment.png``
+    (default ``dest``: ``OUT/show/AGENT_ROUTE_FAMILY_K``). ``agent`` is the stored name; the
+    agent is rebuilt from the spec the folder's configuration records for it (``spec``
+    overrides: for folders written before icrsumo recorded specs)."""
+    from .agents.identity import fingerprint, short
+    from .agents.registry import agent_factory
+    from .evaluation.run import read_config
+    from .instructions.store import read_instruction_sets
+    from .logs import dumps_log, loads_log
+    from .render import write_image
+    from .sim.episode import RunOptions, run_episode
+
+    out = Path(out)
+    cfg = read_config(out)
+    scoring = str(cfg.get("scoring") or "lb1")
+    with ResultStore(out / "results.sqlite") as store:
+        rec = _find(store, agent, route, family, k, int(cfg["seed"]))
+        if rec.status != EpisodeStatus.DONE:
+            raise InputError(out / "results.sqlite", f"episode {agent}/{route}/{family}/{k}",
+                             f"crashed ({rec.message[:120]}), so it has no log to replay",
+                             "rerun it with icrsumo evaluate --retry-crashed, then show it")
+        stored_text = store.log(rec.agent, rec.route_id, rec.family, rec.k, rec.seed)
+        stored_fp = store.agent_fingerprints().get(agent, {""})
+    if stored_text is None:
+        raise InputError(out / "results.sqlite", f"episode {agent}/{route}/{family}/{k}", "has no stored log",
+                         "run it again into another --out folder")
+    stored = loads_log(stored_text)
+    entry = (cfg.get("agents") or {}).get(agent)
+    spec = spec or (entry.get("spec") if isinstance(entry, dict) else None) or agent
+    factory = agent_factory(spec)
+    fp = fingerprint(factory)
+    if fp not in stored_fp and "" not in stored_fp:
+        raise InputError("--agent", agent, f"the agent {spec} is now another agent (fingerprint {short(fp)}, "
+                         f"stored {short(sorted(stored_fp)[0])}): the replay would not be the stored "
+                         "episode",
+                         "restore the agent's code or checkpoint as it was")
+    sc = _scenario(out, cfg, route)
+    sets = {(s.family, s.k): s for s in read_instruction_sets(_instructions(out, rec))}
+    iset = sets.get((rec.family, rec.k))
+    if iset is None:
+        raise InputError(_instructions(out, rec), f"{family} k={k}", "the instruction sequence is missing",
+                         "restore the out folder's instruction files")
+    moment_t, moment = failure_moment(stored, scoring)
+    dest = Path(dest) if dest is not None else out / "show" / safe_name(f"{agent}_{route}_{family}_{k}")
+    dest.mkdir(parents=True, exist_ok=True)
+    recorder = _Recorder(dest / "episode.mp4", moment_t)
+    log = run_episode(sc, iset, factory(), RunOptions(scoring=scoring), callbacks=[recorder])
+    still = dest / "moment.png"
+    if recorder.still is not None:
+        write_image(still, recorder.still, f"t = {moment_t:.1f} s: {moment}")
+    text = dumps_log(log)
+    identical = text == stored_text
+    return ShowResult(rec, recorder.writer.path, still, moment_t, moment, identical,
+                      "" if identical else first_difference(stored, loads_log(text)))

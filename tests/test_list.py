@@ -1,0 +1,36 @@
+"""icrsumo list: what exists, printed from the code's own registries (nothing typed twice)."""
+
+from __future__ import annotations
+
+import pytest
+
+from icrsumo.agents.registry import DEFAULT_AGENT, REGISTRY
+from icrsumo.cli import main
+from icrsumo.resources import bundled_suites
+from icrsumo.vocab import ALL_FAMILIES
+
+
+def _lines(capsys, *argv):
+    assert main(["list", *argv]) == 0
+    return capsys.readouterr().out.splitlines()
+
+
+def test_suites_agents_and_families_come_from_the_registries(capsys):
+    assert [ln.split()[0] for ln in _lines(capsys, "suites")] == list(bundled_suites())
+    agents = _lines(capsys, "agents")
+    assert [ln.split()[0] for ln in agents] == list(REGISTRY)
+    assert [ln.split()[0] for ln in agents if ln.endswith("(default)")] == [DEFAULT_AGENT]
+    assert [ln.split()[0] for ln in _lines(capsys, "families")] == [f.value for f in ALL_FAMILIES]
+
+
+def test_routes_of_a_suite(capsys):
+    rows = _lines(capsys, "routes", "--suite", "langauto-tiny")
+    assert len(rows) == 16 and all(r.split()[1].startswith("Town") for r in rows)
+
+
+@pytest.mark.parametrize("argv, expect", [(["routes", "--suite", "huge"], "--suite: huge: unknown suite"),
+                                          (["colours"], "invalid choice: 'colours'")])
+def test_bad_input_is_one_line(capsys, argv, expect):
+    assert main(["list", *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and expect in err[0]
