@@ -228,13 +228,21 @@ def summarize(records: Iterable[EpisodeRecord], *, suite: str, seed: int, k: int
 
 EPISODE_COLUMNS = ("agent", "route_id", "family", "k", "seed", "status", "ds", "rc", "is",
                    "termination", "termination_class", "n_infractions", "infractions", "length",
-                   "duration", "attempts", "message")
+                   "duration", "attempts", "message", "outside_lanes_pct", "instructions", "end_t",
+                   "end_pos", "end_x", "end_y")
+#: the columns of :data:`EPISODE_COLUMNS` that come from an episode's log and instructions
+END_COLUMNS = ("instructions", "end_t", "end_pos", "end_x", "end_y")
 
 
-def episode_table(records: Iterable[EpisodeRecord]) -> list[dict]:
+def episode_table(records: Iterable[EpisodeRecord], ends: dict | None = None) -> list[dict]:
     """One flat row per episode (columns :data:`EPISODE_COLUMNS`), sorted by
-    (agent, route_id, family, k, seed). ``infractions`` is ``kind:factor`` joined by ``;``."""
+    (agent, route_id, family, k, seed). ``infractions`` is ``kind:factor`` joined by ``;``;
+    ``outside_lanes_pct``: the route advance made outside the lanes, % of the route's length.
+    ``ends``: key -> :data:`END_COLUMNS` values read from the episode's log and instructions
+    (``instructions``: the ids of its texts, the templates, ``|``-joined; ``end_t`` s and
+    ``end_pos`` m along the route where it ended, ``end_x``/``end_y`` m); empty without."""
     rows = []
+    ends = ends or {}
     for r in _sorted_unique(records):
         rows.append({
             "agent": r.agent, "route_id": r.route_id, "family": r.family, "k": r.k, "seed": r.seed,
@@ -243,5 +251,8 @@ def episode_table(records: Iterable[EpisodeRecord]) -> list[dict]:
             "infractions": ";".join(f"{kind}:{factor:g}" for kind, factor in r.infractions),
             "length": r.length, "duration": r.duration, "attempts": r.attempts,
             "message": r.message.replace("\r", " ").replace("\n", " "),
+            "outside_lanes_pct": round(100.0 * r.outside_m / r.length, 2) if r.status == "done" and r.length
+            else None,
+            **{c: ends.get(_key(r), {}).get(c) for c in END_COLUMNS},
         })
     return rows

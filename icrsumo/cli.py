@@ -10,9 +10,11 @@ from pathlib import Path
 from typing import NoReturn
 
 from . import __version__
+from .defaults import DEFAULT_AGENT, DEFAULT_SUITE
 from .errors import InputError
 from .metrics import DEFAULT_SCORING, scoring_names
-from .vocab import Family
+from .resources import bundled_suites
+from .vocab import ALL_FAMILIES, CONTROL_FAMILIES, FAMILIES, Family
 
 
 def _cmd_convert_routes(args: argparse.Namespace) -> int:
@@ -341,13 +343,13 @@ def build_parser() -> argparse.ArgumentParser:
     g = sub.add_parser(
         "generate", help="baseline instructions + counterfactual variants per route",
         description="Write, per converted route, the baseline instruction sequence and K variant "
-        "sequences per family (paraphrase, ambiguity, noise, misleading).",
+        f"sequences per family ({', '.join(FAMILIES)}).",
     )
     g.add_argument("scenarios", help="folder written by convert-routes (or one scenario folder)")
     g.add_argument("--out", required=True, help="output folder")
-    g.add_argument("--families", nargs="+", default=["paraphrase,ambiguity,noise,misleading"],
-                   help="families, space or comma separated: paraphrase, ambiguity, noise, misleading, "
-                   "blank, shuffled (default: the first four)")
+    g.add_argument("--families", nargs="+", default=[",".join(FAMILIES)],
+                   help=f"families, space or comma separated: {', '.join(ALL_FAMILIES)} (default: the "
+                   f"first {len(FAMILIES)})")
     g.add_argument("--k", type=int, default=8, help="variants per family (default 8)")
     g.add_argument("--seed", type=int, default=2026, help="seed of all draws (default 2026)")
     g.add_argument("--templates", type=Path, help="folder with your own template banks")
@@ -374,7 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--k", type=int, default=0, help="variant index (default 0)")
     e.add_argument("--agent", default=None,
                    help="built-in name, module:Class, file.py:Class or remote:URL (default: the "
-                   "default agent of evaluate, bev-token)")
+                   f"default agent of evaluate, {DEFAULT_AGENT})")
     e.add_argument("--log", help="write the episode log (JSON) here")
     e.add_argument("--video", help="write a BEV video with the instruction overlaid (.mp4)")
     e.set_defaults(func=_cmd_run_episode)
@@ -385,15 +387,15 @@ def build_parser() -> argparse.ArgumentParser:
         "of each family (same scenario, seed, traffic), store each episode at once (resumable), "
         "and write summary.json, tables and figures.",
     )
-    v.add_argument("--suite", default="tiny",
-                   help="tiny (default), short, long, langauto-tiny, langauto-short, langauto-long, "
-                        "a route XML file or a convert-routes folder")
+    v.add_argument("--suite", default=DEFAULT_SUITE,
+                   help=f"a bundled suite ({', '.join(bundled_suites())}; default {DEFAULT_SUITE}; "
+                   "icrsumo list suites), a route XML file or a convert-routes folder")
     v.add_argument("--agent", action="append",
                    help="built-in name, module:Class, path/file.py:Class or remote:http://HOST:PORT "
-                   "(repeatable; default bev-ngram-aug)")
+                   f"(repeatable; default {DEFAULT_AGENT})")
     v.add_argument("--family", action="append",
-                   help="paraphrase, ambiguity, noise, misleading, and the controls blank, shuffled "
-                   "(repeatable; default the four)")
+                   help=f"{', '.join(FAMILIES)}, and the controls {', '.join(CONTROL_FAMILIES)} "
+                   f"(repeatable; default the {len(FAMILIES)})")
     v.add_argument("--k", type=int, default=8, help="variants per family (default 8)")
     v.add_argument("--seed", type=int, default=2026, help="seed of the variant draws (default 2026)")
     v.add_argument("--routes", action="append", help="only these route ids (comma separated)")
@@ -439,8 +441,8 @@ def build_parser() -> argparse.ArgumentParser:
         "misleading adds the misleading bank), each candidate scored by a real closed-loop episode stored "
         "like any other; writes OUT/attack.json and OUT/attack.md, with a transfer table between agents.",
     )
-    at.add_argument("--suite", default="tiny", help="as for evaluate (default tiny)")
-    at.add_argument("--agent", action="append", help="as for evaluate (repeatable; default bev-ngram-aug)")
+    at.add_argument("--suite", default=DEFAULT_SUITE, help=f"as for evaluate (default {DEFAULT_SUITE})")
+    at.add_argument("--agent", action="append", help=f"as for evaluate (repeatable; default {DEFAULT_AGENT})")
     at.add_argument("--routes", action="append", help="only these route ids (comma separated)")
     at.add_argument("--seed", type=int, default=2026, help="seed of the search and the suite (default 2026)")
     at.add_argument("--budget", type=int, default=32,
@@ -468,7 +470,7 @@ def build_parser() -> argparse.ArgumentParser:
         "Exit status 0: the replay is the stored episode, 1: it differs, 2: bad input.",
     )
     sh.add_argument("out", help="the --out folder of icrsumo evaluate or attack")
-    sh.add_argument("--agent", help="the stored agent name (default: evaluate's default agent)")
+    sh.add_argument("--agent", help=f"the stored agent name (default {DEFAULT_AGENT})")
     sh.add_argument("--route", required=True, help="route id")
     sh.add_argument("--family", default="baseline", help="baseline (default), a family, attack or transfer")
     sh.add_argument("--k", type=int, default=0, help="the variant (default 0)")

@@ -499,6 +499,17 @@ def _ascii(text: str) -> str:
     return "".join(ch if 32 <= ord(ch) < 127 else ("?" if not ch.isspace() else " ") for ch in text)
 
 
+def map_view_png(renderer: BevRenderer, x: float, y: float, yaw: float,
+                 size: tuple[float, float] = (4.9, 2.1)) -> bytes:
+    """PNG bytes of the BEV's static map layers with the ego at (x, y, yaw) (m, rad) and no
+    other actor: what the report shows where the episode log holds the ego's poses only."""
+    raster = renderer.render((x, y, yaw), size, None, None, {})
+    ok, buf = cv2.imencode(".png", cv2.cvtColor(to_rgb(raster), cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise OSError("cannot encode a PNG")
+    return buf.tobytes()
+
+
 def write_image(path: Path, bgr: np.ndarray, caption: str = "") -> None:
     """Write a BGR frame (:meth:`VideoWriter.frame`) as an image file (PNG by its suffix), with
     an optional one-line ``caption`` in red on a band below it."""

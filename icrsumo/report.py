@@ -101,6 +101,12 @@ def _csv_text(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
     return buf.getvalue()
 
 
+def table_cells(summary: dict) -> tuple[tuple[str, ...], list[tuple[str, str, list[str]]]]:
+    """The results table as text cells: its header and one (agent, family, cells) per row, as
+    the markdown table shows them."""
+    return _HEADER, [(agent, fam, _cells(fam, b, "—")) for agent, fam, b in _rows(summary)]
+
+
 def tables(summary: dict) -> dict[str, str]:
     """The ICR-Drive Table 1 layout as {"md", "csv", "tex"}: one row per (agent, family), the
     baseline row first per agent. Markdown/LaTeX show DS, RC, deltas with 1 decimal, IS with 3,
@@ -205,6 +211,17 @@ def attribution_table(summary: dict, doc: dict, top: int = 20) -> str:
         example = r["example"].replace("|", "/")
         md.append(f"| {r['family']} | {r['template']} | {r['flips']} | {r['uses']} | {_num(rate, 1)} | "
                   f"{example} |")
+    md += ["", "Every flip: the decision where the ego left the route and the instruction active there.",
+           "", "| Agent | Route | Family | k | ended | decision | route wanted | driven | instruction | "
+           "template |",
+           "|---|---|---|---:|---|---|---|---|---|---|"]
+    for f in doc["flips"]:
+        d, ins = f.get("decision") or {}, f.get("instruction") or {}
+        where = f"{d['kind']} at {d['pos']:.0f} m" if d else "—"
+        cells = [f["agent"], f["route_id"], f["family"], str(f["k"]), f["termination"], where,
+                 d.get("route_intent", "—"), d.get("executed") or d.get("outcome", "—"),
+                 ins.get("text", "—"), ins.get("template", "—")]
+        md.append("| " + " | ".join(str(c).replace("|", "/") for c in cells) + " |")
     return "\n".join(md) + "\n"
 
 
@@ -287,11 +304,15 @@ def _agent_colours(agents: Sequence[str]) -> dict[str, Any]:
 
 def rd_to_plane(summary: dict, path: Path) -> None:
     """Scatter of the failure split: x = TO share, y = RD share (% of episodes), one point per
-    (agent, family), labelled; baseline points hollow."""
-    fig = _figure(6.5, 5.5)
+    (agent, family): colour = agent, marker = family (baseline hollow), both in legends (points
+    that coincide stay readable: no text on the plot)."""
+    from matplotlib.lines import Line2D
+
+    fig = _figure(7.5, 6.0)
     ax = fig.add_subplot()
     colours = _agent_colours(list(summary["agents"]))
     top = 0.0
+    families: list[str] = []
     for agent, fam, b in _rows(summary):
         if b["RD"] is None or b["TO"] is None:
             continue
@@ -299,18 +320,26 @@ def rd_to_plane(summary: dict, path: Path) -> None:
         top = max(top, x, y)
         marker = _FAMILY_MARKERS.get(fam, "P")
         c = colours[agent]
-        ax.scatter([x], [y], s=60, marker=marker, facecolors="none" if fam == BASELINE else [c],
-                   edgecolors=[c], linewidths=1.5, zorder=3)
-        ax.annotate(f"{agent}/{fam}", (x, y), xytext=(4, 4), textcoords="offset points", fontsize=7,
-                    color=c)
+        ax.scatter([x], [y], s=80, marker=marker, facecolors="none" if fam == BASELINE else [c],
+                   edgecolors=[c], linewidths=1.6, zorder=3, alpha=0.85)
+        if fam not in families:
+            families.append(fam)
     lim = max(10.0, min(100.0, top * 1.15 + 2.0))
     ax.set_xlim(-1.0, lim)
     ax.set_ylim(-1.0, lim)
     ax.plot([0, 100], [0, 100], color="0.85", lw=0.8, zorder=1)
-    ax.set_xlabel("TO share (% of episodes: timeout, blocked, stuck)")
-    ax.set_ylabel("RD share (% of episodes: route deviation)")
-    ax.set_title(f"Failure split, suite {summary.get('suite', '')}")
+    ax.set_xlabel("TO share (% of episodes: timeout, blocked, stuck)", fontsize=11)
+    ax.set_ylabel("RD share (% of episodes: route deviation)", fontsize=11)
+    ax.tick_params(labelsize=10)
+    ax.set_title(f"Failure split, suite {summary.get('suite', '')}", fontsize=12)
     ax.grid(True, color="0.92", zorder=0)
+    agent_handles = [Line2D([], [], color=c, marker="o", linestyle="", markersize=8, label=a)
+                     for a, c in colours.items()]
+    fam_handles = [Line2D([], [], color="0.3", marker=_FAMILY_MARKERS.get(f, "P"), linestyle="", markersize=8,
+                          markerfacecolor="none" if f == BASELINE else "0.3", label=f) for f in families]
+    first = ax.legend(handles=agent_handles, title="agent", fontsize=9, title_fontsize=9, loc="upper right")
+    ax.add_artist(first)
+    ax.legend(handles=fam_handles, title="family", fontsize=9, title_fontsize=9, loc="center right")
     fig.tight_layout()
     _save(fig, path)
 
@@ -349,11 +378,20 @@ def delta_bars(summary: dict, path: Path) -> None:
     _save(fig, path)
 
 
+#: what the rollout figure writes where an episode ended
+_ENDED = {"completed": "done", "route_deviation": "route deviation", "route_timeout": "timeout",
+          "agent_blocked": "blocked", "stuck": "stuck", "sim_error": "simulator error"}
+#: events the rollout figure marks (the penalised ones)
+_DRAWN_EVENTS = (EventKind.COLLISION_PEDESTRIAN, EventKind.COLLISION_VEHICLE, EventKind.COLLISION_STATIC,
+                 EventKind.RED_LIGHT, EventKind.STOP_SIGN)
+
+
 def paired_rollout(net, baseline_log: EpisodeLog, variant_logs: list[tuple[str, EpisodeLog, str]],
                    baseline_text: str, path: Path, title: str = "") -> None:
-    """The map's lanes around the trajectories (bounding box + 30 m), the baseline trajectory and
-    each counterfactual one (``(label, log, instruction text)``) with start (o) and end (x)
-    markers, and the instruction texts as captions under the map, coloured like their lines."""
+    """The map's lanes around the trajectories (bounding box + 30 m), the route, the baseline
+    trajectory (wide, underneath) and each counterfactual one (``(label, log, instruction
+    text)``) with start (o) and end (X, with why it ended) markers and its penalised events (*),
+    and the instruction texts as captions under the map, coloured like their lines."""
     from matplotlib import colormaps
     from matplotlib.collections import LineCollection
 
@@ -398,13 +436,26 @@ def paired_rollout(net, baseline_log: EpisodeLog, variant_logs: list[tuple[str, 
             lanes.append(s)
 
     ax.add_collection(LineCollection(lanes, colors="0.75", linewidths=0.6, zorder=1))
+    if baseline_log.route:
+        route = np.asarray([p[:2] for p in baseline_log.route], dtype=float)
+        ax.plot(route[:, 0], route[:, 1], color="#9ecae1", lw=6, alpha=0.6, zorder=1.5, label="route",
+                solid_capstyle="round")
     for label, log, _, colour in trajs:
         if not len(log.x):
             continue
         x, y = np.asarray(log.x), np.asarray(log.y)
-        ax.plot(x, y, color=colour, lw=1.8 if label == "baseline" else 1.4, label=label, zorder=3, alpha=0.9)
+        base = label == "baseline"  # drawn wide underneath: an identical variant cannot hide it
+        ax.plot(x, y, color=colour, lw=4.0 if base else 1.4, label=label, zorder=2 if base else 3,
+                alpha=0.45 if base else 0.9)
         ax.plot(x[0], y[0], "o", color=colour, ms=6, zorder=4)
-        ax.plot(x[-1], y[-1], "X", color=colour, ms=7, zorder=4)
+        ax.plot(x[-1], y[-1], "X", color=colour, ms=8, zorder=4)
+        ax.annotate(_ENDED.get(str(log.termination), str(log.termination)), (x[-1], y[-1]), xytext=(5, -10),
+                    textcoords="offset points", fontsize=8, color=colour, zorder=5)
+        for ev in log.events:
+            if ev.kind in _DRAWN_EVENTS and (ev.x or ev.y):
+                ax.plot(ev.x, ev.y, "*", color=colour, ms=11, mec="black", mew=0.5, zorder=5)
+                ax.annotate(str(ev.kind).replace("_", " "), (ev.x, ev.y), xytext=(5, 4),
+                            textcoords="offset points", fontsize=7, color=colour, zorder=5)
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal", adjustable="box")
@@ -674,12 +725,11 @@ def write_attribution(summary: dict, doc: dict, out_dir: Path) -> None:
 
 
 def write_report(summary: dict, records: Sequence[EpisodeRecord], out_dir: Path,
-                 logs: Any = None, nets: Any = None) -> str:
+                 ends: dict | None = None) -> str:
     """Write summary.json, results.{md,csv,tex}, statistics.{md,csv}, episodes.csv, figures/rd_to.png,
     figures/delta_bars.png and leaderboard/<agent>_<family>.json (baseline included) under
-    ``out_dir``; returns the Markdown table. ``logs`` and ``nets`` are accepted for the caller's
-    convenience and unused: paired rollout figures are written by the caller."""
-    del logs, nets
+    ``out_dir``; returns the Markdown table. ``ends``: the episodes' log facts for episodes.csv
+    (:func:`icrsumo.aggregate.episode_table`); paired rollout figures are written by the caller."""
     out = Path(out_dir)
     write_atomic(out / "summary.json", dumps_json(summary))
     t = tables(summary)
@@ -689,7 +739,7 @@ def write_report(summary: dict, records: Sequence[EpisodeRecord], out_dir: Path,
     st = statistics_tables(summary)
     write_atomic(out / "statistics.md", st["md"])
     write_atomic(out / "statistics.csv", st["csv"])
-    rows = episode_table(records)
+    rows = episode_table(records, ends)
     write_atomic(out / "episodes.csv", _csv_text(EPISODE_COLUMNS, ([row[c] for c in EPISODE_COLUMNS]
                                                                     for row in rows)))
     rd_to_plane(summary, out / "figures" / "rd_to.png")

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..defaults import DEFAULT_AGENT as _DEFAULT
 from ..errors import InputError
 from ..learn.agent import CHECKPOINTS, NgramAgent, NgramAugAgent, TokenAgent
 from .base import Agent
@@ -111,9 +112,9 @@ for _cls in (TokenAgent, NgramAgent, NgramAugAgent):
         register(_cls.name, _cls, description=f"learned: {_doc.replace('``', '')}")
 del _cls, _doc
 
-#: the agent `icrsumo evaluate` uses when none is named: the shipped learned agent whose text
-#: encoder was trained with the training bank's paraphrases and noise (README, Learned agents)
-DEFAULT_AGENT = "bev-ngram-aug" if "bev-ngram-aug" in REGISTRY else "instruction-follower"
+#: the agent `icrsumo evaluate` uses when none is named (:data:`icrsumo.defaults.DEFAULT_AGENT`,
+#: where its checkpoint ships)
+DEFAULT_AGENT = _DEFAULT if _DEFAULT in REGISTRY else "instruction-follower"
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,8 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     families = tuple(f for f in ALL_FAMILIES if f in opts.families)  # canonical order
     summary = summarize(records, suite=opts.suite, seed=opts.seed, k=opts.k, families=families)
     summary["scoring"] = opts.scoring
-    attribution = attach(summary, records, episode_decisions(store, records, instr_dir))
+    ends: dict = {}
+    attribution = attach(summary, records, episode_decisions(store, records, instr_dir, ends))
     if rescored_short:
         summary["episodes"]["rescored_short"] = rescored_short
         print(f"icrsumo: note: {rescored_short} episodes ended, under the rules they were run with, "
@@ -40,8 +41,9 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
         summary["episodes"]["stored_not_in_report"] = not_shown
         print(f"icrsumo: note: {not_shown} stored episodes of other agents, routes, families or k are "
               f"not in this report (icrsumo report {out} shows all)", file=sys.stderr)
-    table = write_report(summary, records, out)
+    table = write_report(summary, records, out, ends)
     write_attribution(summary, attribution, out)
+    write_html(out, summary, records, attribution, store, scenarios, instr_dir)
     try:
         rollout_figure(opts, out, store, records, scenarios, instr_dir)
     except InputError as err:  # the figure is optional; the numbers are all in the tables
@@ -51,11 +53,70 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     return summary
 
 
-def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_dir: Path) -> dict:
+def write_html(out: Path, summary: dict, records: list[EpisodeRecord], attribution: dict,
+               store: ResultStore, scenarios: Path, instr_dir: Path) -> None:
+    """OUT/report.html (:mod:`icrsumo.html_report`) from the stored logs, the routes'
+    instruction files and networks; a route whose files cannot be read is drawn without them."""
+    from ..html_report import write_html_report
+    from ..instructions.store import read_instruction_sets
+    from ..networks import load_net
+    from ..render import BevRenderer, map_view_png
+
+    scen = {}
+    if Path(scenarios).is_dir() and (Path(scenarios) / "index.json").is_file():
+        for d in find_scenarios(scenarios):
+            try:
+                sc = read_scenario(d)
+            except InputError:
+                continue
+            scen[sc.route_id] = sc
+    loaded_nets: dict[str, object] = {}
+    renderers: dict[str, BevRenderer] = {}
+
+    def logs(r: EpisodeRecord):
+        try:
+            return store.episode_log(r.agent, r.route_id, r.family, r.k, r.seed)
+        except InputError:
+            return None
+
+    def sets(route: str) -> dict:
+        try:
+            found = read_instruction_sets(instr_dir / f"{safe_name(route)}.json")
+            return {(str(s.family), s.k): s for s in found}
+        except InputError:
+            return {}
+
+    def nets(route: str):
+        sc = scen.get(route)
+        if sc is None:
+            return None
+        if str(sc.net) not in loaded_nets:
+            try:
+                loaded_nets[str(sc.net)] = load_net(sc.net)
+            except InputError:
+                loaded_nets[str(sc.net)] = None
+        return loaded_nets[str(sc.net)]
+
+    def render(route: str):
+        net = nets(route)
+        if net is None:
+            return None
+        key = str(scen[route].net)
+        if key not in renderers:
+            renderers[key] = BevRenderer(net)
+        r = renderers[key]
+        return lambda x, y, yaw: map_view_png(r, x, y, yaw)
+
+    write_html_report(out / "report.html", summary, records, attribution, logs, sets, nets, render)
+
+
+def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_dir: Path,
+                      ends: dict | None = None) -> dict:
     """Key -> the decisions (:func:`icrsumo.decisions.classify_decisions`) of every finished
     episode in ``records``, from its stored log and its route's instruction file; a route whose
     instruction file cannot be read, or an episode whose stored log is damaged, is left out and
-    named on stderr."""
+    named on stderr. ``ends`` (filled when given): key -> where and when each episode ended and
+    the ids of its instruction texts (:data:`icrsumo.aggregate.END_COLUMNS`), read on the way."""
     from ..decisions import classify_decisions
     from ..instructions.store import read_route_file
 
@@ -83,8 +144,13 @@ def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_di
             damaged.append(err.line())
             continue
         if log is not None:
-            out[(r.agent, r.route_id, str(r.family), r.k, r.seed)] = classify_decisions(
-                route[0], route[1][(r.family, r.k)], log)
+            iset = route[1][(r.family, r.k)]
+            out[(r.agent, r.route_id, str(r.family), r.k, r.seed)] = classify_decisions(route[0], iset, log)
+            if ends is not None and log.t:
+                ends[(r.agent, r.route_id, r.family, r.k, r.seed)] = {
+                    "instructions": "|".join(i.template or "baseline" for i in iset.instructions),
+                    "end_t": round(log.t[-1], 2), "end_pos": round(log.progress[-1], 1),
+                    "end_x": round(log.x[-1], 1), "end_y": round(log.y[-1], 1)}
     if unreadable:
         print(f"icrsumo: note: no decision attribution for {len(unreadable)} routes whose instruction file "
               f"cannot be read (first: {unreadable[0]})", file=sys.stderr)
@@ -96,8 +162,13 @@ def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_di
 
 def rollout_figure(opts: EvalOptions, out: Path, store: ResultStore, records: list[EpisodeRecord],
                    scenarios: Path, instr_dir: Path) -> None:
-    """Paired rollout figure: baseline vs k = 0 of each family for one route and agent
-    (``opts.rollout_route``, default the first with a finished baseline)."""
+    """Paired rollout figure: the baseline against one variant of each family for one route and
+    agent (``opts.rollout_route``, default the first with a finished baseline): the first
+    variant that failed (else k = 0), captioned with the instruction active where it went wrong
+    (where it diverged from the baseline, else where it ended)."""
+    import numpy as np
+
+    from ..html_report import divergence_t
     from ..instructions.store import read_instruction_sets
     from ..networks import load_net
     from ..report import paired_rollout
@@ -113,9 +184,24 @@ def rollout_figure(opts: EvalOptions, out: Path, store: ResultStore, records: li
     sets = {(s.family, s.k): s for s in read_instruction_sets(instr_dir / f"{safe_name(route)}.json")}
     variants = []
     for fam in opts.families:
-        log = store.episode_log(agent, route, fam, 0, opts.seed)
-        if log is not None and (fam, 0) in sets:
-            variants.append((f"{fam} k=0", log, sets[(fam, 0)].instructions[0].rendered()))
+        mine = sorted((r for r in records if (r.agent, r.route_id, r.family) == (agent, route, fam)
+                       and r.status == "done"), key=lambda r: r.k)
+        failed = [r for r in mine if r.termination_class != "done"]
+        chosen = failed[0] if failed else mine[0] if mine else None  # a variant that failed, if any
+        if chosen is None or (fam, chosen.k) not in sets:
+            continue
+        log = store.episode_log(agent, route, fam, chosen.k, opts.seed)
+        if log is None or not log.t:
+            continue
+        t_wrong = divergence_t(base_log, log) if failed else None
+        at = t_wrong if t_wrong is not None else (log.t[-1] if failed else log.t[0])
+        i = min(int(np.searchsorted(log.t, at)), len(log.t) - 1)
+        iid = log.instruction[i] if failed else 0
+        texts = {ins.id: ins.rendered() for ins in sets[(fam, chosen.k)].instructions}
+        text = texts.get(iid, texts.get(0, ""))
+        if failed:
+            text = f"(active at t = {at:.1f} s, where it went wrong) {text}"
+        variants.append((f"{fam} k={chosen.k}", log, text))
     sc_dir = next((d for d in find_scenarios(scenarios) if read_scenario(d).route_id == route), None)
     if sc_dir is None:
         return
