@@ -27,7 +27,7 @@ from icrsumo.termination import dense_route, run_monitor  # noqa: E402
 
 pytestmark = pytest.mark.sumo
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+README = Path(__file__).resolve().parents[1] / "docs" / "gym.md"  # the page that holds the example
 
 
 def _policy(obs) -> np.ndarray:

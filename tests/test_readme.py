@@ -21,7 +21,7 @@ from icrsumo.scenario import Scenario
 
 pytestmark = pytest.mark.sumo
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+README = Path(__file__).resolve().parents[1] / "docs" / "api.md"  # the page that holds the example
 
 
 def _api_example() -> str:

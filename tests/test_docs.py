@@ -1,0 +1,39 @@
+"""The documentation: the README stays a newcomer's page whose names come from the code, and the
+docs site builds with MkDocs with every warning an error (broken links and anchors included)."""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _sync_names():
+    spec = importlib.util.spec_from_file_location("sync_names", ROOT / "tools" / "sync_names.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_readme_is_short_and_its_names_come_from_the_code():
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert len(text.splitlines()) < 300, "the README is a newcomer's page: move measurements to docs/"
+    assert _sync_names().synced(text) == text, "run python tools/sync_names.py"
+    for target in re.findall(r"\]\((docs/[^)#]+)", text):
+        assert (ROOT / target).is_file(), target
+
+
+def test_the_docs_site_builds_strictly(tmp_path):
+    argv = [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")]
+    run = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    home = (tmp_path / "site" / "index.html").read_text(encoding="utf-8")
+    from icrsumo.agents.registry import DEFAULT_AGENT
+
+    assert "Bring your own agent" in home and DEFAULT_AGENT in home
+    api = (tmp_path / "site" / "api" / "index.html").read_text(encoding="utf-8")
+    assert "{{" not in api and f"<code>{DEFAULT_AGENT}</code>" in api  # the placeholder, filled from the code
