@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .fsio import write_atomic
+from .metrics import PENALTIES
 from .types import EpisodeLog, EpisodeRecord, InstructionSet
 from .vocab import Family
 
@@ -303,6 +304,11 @@ def html_report(summary: dict, records: Sequence[EpisodeRecord], attribution: Ma
             else:
                 ended = str(r.termination)
             inf = "; ".join(f"{k} ×{f:g}" for k, f in r.infractions) or "—"
+            if log is not None:  # when and where: the penalised events of the log
+                at = [f"{ev.kind} at t = {ev.t:.1f} s, {ev.pos:.0f} m" for ev in log.events
+                      if ev.kind in PENALTIES]
+                if at:
+                    inf += " (" + "; ".join(at) + ")"
             rows_html.append(
                 f'<tr data-agent="{_e(r.agent)}" data-family="{_e(r.family)}" data-outcome="{kind}">'
                 f'<td class=l>{_e(r.agent)}</td><td class=l>{_e(r.family)}</td><td>{r.k}</td>'

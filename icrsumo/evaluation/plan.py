@@ -60,6 +60,9 @@ class PreparedSuite:
 
 def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None) -> dict:
     """The configuration stored in OUT/config.json; an InputError when OUT holds another one.
+    A larger ``--k`` than the folder's is the same configuration grown: ``k_grown_from`` lists
+    the folder's earlier K, and the instructions keep every earlier variant (the new ones are
+    drawn from the templates those did not use).
     With a ``--baseline-bank`` (``bank``: the file already loaded) the file's SHA-256 is part of
     it (its name is recorded too, but another path to the same bytes is the same
     configuration)."""
@@ -74,9 +77,17 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None)
         if not isinstance(old, dict):
             raise InputError(path, "", "is not a JSON object", "restore it, or use another --out folder")
         diff = [k for k in compared if old.get(k) != compared[k]]
+        grown = [int(x) for x in old.get("k_grown_from", []) if isinstance(x, int)]
+        if diff == ["k"] and isinstance(old.get("k"), int) and opts.k > old["k"]:
+            grown, diff = [*grown, old["k"]], []  # a larger --k adds the missing variants
+        if grown:
+            config["k_grown_from"] = grown
         if diff:
             shown = ", ".join(f"{k}={old.get(k)!r} (now {compared[k]!r})" for k in diff)
             fix = "use another --out folder, or the same options"
+            if diff == ["k"]:
+                fix = (f"use --k {old.get('k')} or more (a larger --k adds the missing variants), or "
+                       "another --out folder")
             if "converter" in diff:
                 fix = ("its scenarios were converted by an earlier icrsumo, whose background traffic "
                        "differs (docs/fidelity.md, class F), so new episodes would not be comparable: "
@@ -130,7 +141,7 @@ def prepare_suite(opts: EvalOptions, agents: Mapping[str, dict] | None = None) -
             print(bank.note(), file=sys.stderr)
         written, failures = generate(scenarios, instr_dir, GenerateOptions(
             families=FAMILIES + tuple(f for f in CONTROL_FAMILIES if f in opts.families), k=opts.k,
-            seed=opts.seed, workers=1, baseline_bank=bank))
+            seed=opts.seed, workers=1, baseline_bank=bank, grown_from=tuple(config.get("k_grown_from", ()))))
         if not written and not (out / "results.sqlite").exists():  # (with a store: run checks it)
             lines = list(skipped) + list(failures)
             raise InputError.of_line(lines[0]) if lines else no_routes(opts)

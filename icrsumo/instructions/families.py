@@ -38,20 +38,25 @@ from .banks import CONTRADICTS, Banks, Entry, baseline_catalogue, fill
 from .intent import classify_intent
 from .noise import apply_ops
 
-__all__ = ["ALL_FAMILIES", "FAMILIES", "make_variants"]
+__all__ = ["ALL_FAMILIES", "FAMILIES", "extend_variants", "make_variants"]
 
 NOISE_TRIES = 25
 
 
-def _draw(rng: np.random.Generator, n: int, k: int, what: str) -> list[int]:
-    if k > n:
-        raise InputError(what, "", f"bank has {n} entries, cannot draw K={k} without replacement",
-                         f"lower --k to {n} or add entries")
-    return [int(i) for i in rng.choice(n, size=k, replace=False)]
+def _draw(rng: np.random.Generator, n: int, k: int, what: str,
+          used: frozenset[int] = frozenset()) -> list[int]:
+    """``k`` distinct indices of a pool of ``n``, none of ``used`` (the entries earlier variants
+    took, when a folder's K grows); with none used, exactly ``rng.choice(n, k)``."""
+    avail = [i for i in range(n) if i not in used]
+    if k > len(avail):
+        left = f"{len(avail)} unused" if used else str(n)
+        raise InputError(what, "", f"bank has {left} entries, cannot draw K={k} without replacement",
+                         f"lower --k to {len(avail) + len(used) if used else n} or add entries")
+    return [avail[int(i)] for i in rng.choice(len(avail), size=k, replace=False)]
 
 
 def _bank_variants(instr: Instruction, family: str, banks: Banks, k: int,
-                   rng: np.random.Generator) -> list[tuple[str, str]]:
+                   rng: np.random.Generator, used: frozenset[str] = frozenset()) -> list[tuple[str, str]]:
     """(text, template id) for the K variants of one instruction."""
     tau = instr.intent
     if family == "ambiguity":
@@ -64,7 +69,8 @@ def _bank_variants(instr: Instruction, family: str, banks: Banks, k: int,
         pool = bank[tau]["distance" if "[x]" in instr.text else "plain"]
         want = frozenset({tau}) if family == "paraphrase" else CONTRADICTS[tau]
     out = []
-    for i in _draw(rng, len(pool), k, f"{banks.folder}/{family}.json"):
+    taken = frozenset(i for i, e in enumerate(pool) if e.id in used)
+    for i in _draw(rng, len(pool), k, f"{banks.folder}/{family}.json", taken):
         entry = pool[i]
         text = fill(entry.text, instr.junction)
         got = classify_intent(text)
@@ -79,10 +85,11 @@ def _bank_variants(instr: Instruction, family: str, banks: Banks, k: int,
 
 
 def _noise_variants(instr: Instruction, banks: Banks, k: int,
-                    rng: np.random.Generator) -> list[tuple[str, str]]:
+                    rng: np.random.Generator, used: frozenset[str] = frozenset()) -> list[tuple[str, str]]:
     tau = instr.intent
     out = []
-    for i in _draw(rng, len(banks.noise), k, f"{banks.folder}/noise.json"):
+    taken = frozenset(i for i, (op_id, _) in enumerate(banks.noise) if op_id in used)
+    for i in _draw(rng, len(banks.noise), k, f"{banks.folder}/noise.json", taken):
         op_id, ops = banks.noise[i]
         for _ in range(NOISE_TRIES):
             text = apply_ops(instr.text, ops, rng)
@@ -97,7 +104,7 @@ def _noise_variants(instr: Instruction, banks: Banks, k: int,
 
 
 def _shuffled_variants(instr: Instruction, banks: Banks, k: int,
-                       rng: np.random.Generator) -> list[tuple[str, str]]:
+                       rng: np.random.Generator, used: frozenset[str] = frozenset()) -> list[tuple[str, str]]:
     """(text, template id) for the K ``shuffled`` variants of one instruction."""
     tau = instr.intent
     if tau in (Intent.STOP, Intent.UNKNOWN):
@@ -105,18 +112,42 @@ def _shuffled_variants(instr: Instruction, banks: Banks, k: int,
     has_x = "[x]" in instr.text
     pool = [(tid, text) for tid, text, intent in baseline_catalogue(banks)
             if intent != tau and ("[x]" in text) == has_x]
-    return [(pool[i][1], pool[i][0]) for i in _draw(rng, len(pool), k, f"{banks.folder}/baseline.json")]
+    taken = frozenset(i for i, (tid, _) in enumerate(pool) if tid in used)
+    return [(pool[i][1], pool[i][0])
+            for i in _draw(rng, len(pool), k, f"{banks.folder}/baseline.json", taken)]
 
 
 def _family_variants(family: str, instr: Instruction, banks: Banks, k: int,
-                     rng: np.random.Generator) -> list[tuple[str, str]]:
+                     rng: np.random.Generator, used: frozenset[str] = frozenset()) -> list[tuple[str, str]]:
+    """(text, template id) of ``k`` variants of one instruction, none from the templates in
+    ``used``."""
     if family == Family.NOISE:
-        return _noise_variants(instr, banks, k, rng)
+        return _noise_variants(instr, banks, k, rng, used)
     if family == Family.BLANK:
         return [("", "blank")] * k
     if family == Family.SHUFFLED:
-        return _shuffled_variants(instr, banks, k, rng)
-    return _bank_variants(instr, family, banks, k, rng)
+        return _shuffled_variants(instr, banks, k, rng, used)
+    return _bank_variants(instr, family, banks, k, rng, used)
+
+
+def _sets(baseline: InstructionSet, family: str, per_instr: list[list[tuple[str, str]]], k0: int,
+          n: int, seed: int) -> list[InstructionSet]:
+    """The ``n`` sequences k0 .. k0 + n - 1 of ``family`` from (text, template) per instruction
+    and k."""
+    sets = []
+    for j in range(n):
+        instrs = tuple(
+            Instruction(
+                id=ins.id, trigger=ins.trigger, text=per_instr[i][j][0], intent=ins.intent,
+                type=ins.type, distance=ins.distance if "[x]" in per_instr[i][j][0] else None,
+                maneuver_pos=ins.maneuver_pos, junction=ins.junction,
+                template=per_instr[i][j][1], source=ins.text,
+            )
+            for i, ins in enumerate(baseline.instructions)
+        )
+        sets.append(InstructionSet(route_id=baseline.route_id, family=family, k=k0 + j, seed=seed,
+                                   instructions=instrs, notices=baseline.notices))
+    return sets
 
 
 def make_variants(baseline: InstructionSet, families: tuple[str, ...], k: int, banks: Banks,
@@ -127,18 +158,28 @@ def make_variants(baseline: InstructionSet, families: tuple[str, ...], k: int, b
     sets = []
     for family in families:
         n = variants_of(family, k)
-        per_instr = [_family_variants(family, ins, banks, n, rng) for ins in baseline.instructions]
-        for kk in range(n):
-            instrs = tuple(
-                Instruction(
-                    id=ins.id, trigger=ins.trigger, text=per_instr[n][kk][0], intent=ins.intent,
-                    type=ins.type, distance=ins.distance if "[x]" in per_instr[n][kk][0] else None,
-                    maneuver_pos=ins.maneuver_pos, junction=ins.junction,
-                    template=per_instr[n][kk][1], source=ins.text,
-                )
-                for n, ins in enumerate(baseline.instructions)
-            )
-            sets.append(InstructionSet(route_id=baseline.route_id, family=family, k=kk,
-                                       seed=seed, instructions=instrs,
-                                       notices=baseline.notices))
+        sets += _sets(baseline, family, [_family_variants(family, ins, banks, n, rng)
+                                         for ins in baseline.instructions], 0, n, seed)
     return sets
+
+
+def extend_variants(baseline: InstructionSet, sets: list[InstructionSet], families: tuple[str, ...],
+                    k_new: int, banks: Banks, seed: int, rng: np.random.Generator) -> list[InstructionSet]:
+    """``sets`` (K variants per family, as :func:`make_variants` made them) grown to ``k_new``
+    per family: the K sequences stay as they are; the new ones k = K .. k_new - 1 are drawn with
+    ``rng`` from the templates no earlier sequence of the family used at that instruction, in
+    family order (a folder whose --k grows; ``blank`` keeps its one sequence). Family order,
+    then k."""
+    out = []
+    for family in families:
+        have = sorted((s for s in sets if s.family == family), key=lambda s: s.k)
+        n_new = variants_of(family, k_new) - len(have)
+        out += have
+        if n_new <= 0:
+            continue
+        per_instr = []
+        for idx, ins in enumerate(baseline.instructions):
+            used = frozenset(s.instructions[idx].template for s in have)
+            per_instr.append(_family_variants(family, ins, banks, n_new, rng, used))
+        out += _sets(baseline, family, per_instr, len(have), n_new, seed)
+    return out

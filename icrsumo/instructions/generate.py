@@ -31,7 +31,7 @@ from ..vocab import CONTROL_FAMILIES
 from .banks import Banks, load_banks
 from .baseline import LAYOUT_VERSION, build_baseline
 from .baseline_bank import BaselineBank, load_baseline_bank
-from .families import ALL_FAMILIES, FAMILIES, make_variants
+from .families import ALL_FAMILIES, FAMILIES, extend_variants, make_variants
 from .maneuvers import extract_maneuvers, is_highway
 from .store import FORMAT, route_document
 
@@ -52,6 +52,9 @@ class GenerateOptions:
     workers: int = 1
     llm: object | None = None
     baseline_bank: Path | BaselineBank | None = None
+    #: the K an out folder had before its --k grew, oldest first: the variants are drawn for the
+    #: first K and extended step by step (:func:`icrsumo.instructions.families.extend_variants`)
+    grown_from: tuple[int, ...] = ()
 
     def check(self) -> None:
         bad = [f for f in self.families if f not in ALL_FAMILIES]
@@ -62,6 +65,14 @@ class GenerateOptions:
             raise InputError("--k", "", f"K={self.k} out of range", "use 1 to 64 (default 8)")
         if self.workers < 1:
             raise InputError("--workers", "", "must be at least 1", "give a positive count")
+        ks = (*self.grown_from, self.k)
+        if any(a >= b for a, b in zip(ks, ks[1:])) or min(ks) < 1:
+            grown = ", ".join(map(str, self.grown_from))
+            raise InputError("--k", str(self.k), f"cannot grow from K = {grown}",
+                             "give a larger --k than the folder's")
+        if self.grown_from and self.llm is not None:
+            raise InputError("--k", str(self.k), "a folder's K grows with the template banks only",
+                             "generate the larger K into another folder")
         check_seed(self.seed)
 
 
@@ -73,6 +84,11 @@ def _banks(folder: str | None) -> Banks:
 def route_rng(seed: int, route_id: str) -> np.random.Generator:
     """The Generator that drives every counterfactual draw of one route."""
     return np.random.default_rng([seed, zlib.crc32(route_id.encode("utf-8"))])
+
+
+def grow_rng(seed: int, route_id: str, k_old: int, k_new: int) -> np.random.Generator:
+    """The generator of the variants K = k_old .. k_new - 1 added when a folder's --k grows."""
+    return np.random.default_rng([seed, zlib.crc32(route_id.encode("utf-8")), k_old, k_new])
 
 
 def _highway_spans(sc: Scenario, net) -> tuple[tuple[float, float], ...]:
@@ -106,8 +122,12 @@ def generate_route(scenario_dir: Path, opts: GenerateOptions) -> tuple[str, dict
     user = _baseline_bank(opts)
     baseline, maneuvers = baseline_set(sc, banks, sc.seed, user)
     if opts.llm is None:
-        variants = make_variants(baseline, opts.families, opts.k, banks, opts.seed,
+        ks = (*opts.grown_from, opts.k)
+        variants = make_variants(baseline, opts.families, ks[0], banks, opts.seed,
                                  route_rng(opts.seed, sc.route_id))
+        for k_old, k_new in zip(ks, ks[1:]):  # a folder whose --k grew: the old variants stay
+            variants = extend_variants(baseline, variants, opts.families, k_new, banks, opts.seed,
+                                       grow_rng(opts.seed, sc.route_id, k_old, k_new))
         generator = "templates"
     else:
         from .llm import llm_variants
@@ -119,6 +139,7 @@ def generate_route(scenario_dir: Path, opts: GenerateOptions) -> tuple[str, dict
                               else llm_variants(baseline, fam, opts.k, opts.seed, opts.llm))]
         generator = f"llm:{opts.llm.model}"
     meta = {"seed": opts.seed, "k": opts.k, "families": list(opts.families),
+            **({"grown_from": list(opts.grown_from)} if opts.grown_from else {}),
             "generator": generator, "layout": LAYOUT_VERSION, "banks_sha256": banks.sha256,
             **({"baseline_bank_sha256": user.sha256} if user is not None else {}),
             "scenario_hash": sc.manifest.get("source_hash", "")}
