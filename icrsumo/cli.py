@@ -231,6 +231,9 @@ def _cmd_list(args: argparse.Namespace) -> int:
         for name in REGISTRY:
             mark = " (default)" if name == DEFAULT_AGENT else ""
             print(f"{name:22} {REGISTRY.entry(name).description}{mark}")
+        for name, dist, why in REGISTRY.skipped_plugins:
+            print(f"icrsumo: note: the agent {name!r} of the plugin {dist} is not registered: {why}",
+                  file=sys.stderr)
     else:
         for fam in ALL_FAMILIES:
             kind = "default" if fam in FAMILIES else "control" if fam in CONTROL_FAMILIES else ""
@@ -269,7 +272,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 
 def _cmd_check_agent(args: argparse.Namespace) -> int:
-    from .agents.check import check_agent
+    from .check_agent import check_agent
 
     t0 = time.perf_counter()
     rep = check_agent(args.spec, route=args.route, timeout=args.timeout, max_act_ms=args.max_act_ms,

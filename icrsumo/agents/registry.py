@@ -22,15 +22,13 @@ import importlib.util
 import inspect
 import sys
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from ..defaults import DEFAULT_AGENT as _DEFAULT
 from ..errors import InputError
-from ..learn.agent import CHECKPOINTS, NgramAgent, NgramAugAgent, TokenAgent
 from .base import Agent
-from .privileged import InstructionFollower, RouteOracle
 
 #: ``remote:http://HOST:PORT``: an agent behind an icrsumo-agent/1 server (icrsumo.agents.remote)
 REMOTE_PREFIX = "remote:"
@@ -39,35 +37,54 @@ REMOTE_PREFIX = "remote:"
 @dataclass(frozen=True)
 class AgentEntry:
     """A registered agent: its ``name`` (the spec), its ``factory`` (a zero-argument callable,
-    usually the agent class) and a one-line ``description``."""
+    usually the agent class; None until a lazy entry is first asked for), ``target``
+    (``module:attr`` a lazy entry imports then) and a one-line ``description``; ``plugin``: the
+    distribution that declared it in the ``icrsumo.agents`` entry-point group ("" for others)."""
 
     name: str
-    factory: Callable[..., Agent]
+    factory: Callable[..., Agent] | None
     description: str = ""
+    target: str = ""
+    plugin: str = ""
+
+
+#: the entry-point group through which installed packages add agents (``pip install my-agent``
+#: makes ``--agent NAME`` work): ``[project.entry-points."icrsumo.agents"] NAME = "module:Class"``
+ENTRY_POINT_GROUP = "icrsumo.agents"
 
 
 class AgentRegistry(Mapping[str, Callable[..., Agent]]):
     """Registered agent names -> their factories (read-only as a mapping; change it with
-    :meth:`register` and :meth:`unregister`)."""
+    :meth:`register` and :meth:`unregister`). An entry given as ``"module:attr"`` is imported
+    only when it is first asked for, so the registry imports no agent module of its own."""
 
     def __init__(self) -> None:
         self._entries: dict[str, AgentEntry] = {}
+        #: plugin entry points that could not be registered: (name, distribution, why)
+        self.skipped_plugins: list[tuple[str, str, str]] = []
 
-    def register(self, name: str, factory: Callable[..., Agent], *, description: str = "") -> AgentEntry:
-        """Register ``factory`` under ``name``; a ValueError when the name is taken or not a
-        valid spec (empty, with whitespace, or with ``:``, which marks module:Class and remote
-        specs), a TypeError when ``factory`` is not callable."""
+    def register(self, name: str, factory: Callable[..., Agent] | str, *, description: str = "",
+                 plugin: str = "") -> AgentEntry:
+        """Register ``factory`` (a callable, or ``"module:attr"`` imported when first asked
+        for) under ``name``; a ValueError when the name is taken or not a valid spec (empty,
+        with whitespace, or with ``:``, which marks module:Class and remote specs), a TypeError
+        when ``factory`` is neither callable nor a ``module:attr`` string."""
         if not isinstance(name, str) or not name or ":" in name or any(c.isspace() for c in name):
             raise ValueError(f"agent name {name!r} is not valid: use a non-empty name without ':' or "
                              f"whitespace, e.g. 'my-agent'")
-        if not callable(factory):
+        lazy = isinstance(factory, str)
+        if lazy and factory.count(":") != 1:
+            raise TypeError(f"cannot register agent {name!r}: {factory!r} is not 'module:attr'")
+        if not lazy and not callable(factory):
             raise TypeError(f"cannot register agent {name!r}: its factory {factory!r} is not callable "
                             f"(pass the agent class or a zero-argument function)")
         old = self._entries.get(name)
         if old is not None:
-            raise ValueError(f"agent {name!r} is already registered (by {_qualname(old.factory)}): pick "
+            by = old.target or _qualname(old.factory)
+            raise ValueError(f"agent {name!r} is already registered (by {by}): pick "
                              f"another name, or unregister({name!r}) first")
-        entry = self._entries[name] = AgentEntry(name, factory, description)
+        entry = AgentEntry(name, None if lazy else factory, description, factory if lazy else "", plugin)
+        self._entries[name] = entry
         return entry
 
     def unregister(self, name: str) -> AgentEntry:
@@ -81,13 +98,35 @@ class AgentRegistry(Mapping[str, Callable[..., Agent]]):
         return self._entries[name]
 
     def __getitem__(self, name: str) -> Callable[..., Agent]:
-        return self._entries[name].factory
+        entry = self._entries[name]
+        if entry.factory is None:
+            entry = self._entries[name] = replace(entry, factory=_load_target(name, entry))
+        return entry.factory
+
+    def __contains__(self, name: object) -> bool:  # without loading a lazy entry
+        return name in self._entries
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._entries)
 
     def __len__(self) -> int:
         return len(self._entries)
+
+
+def _load_target(name: str, entry: AgentEntry) -> Callable[..., Agent]:
+    """The factory a lazy entry names (an InputError naming the agent when it cannot load)."""
+    module, _, attr = entry.target.partition(":")
+    where = f" (plugin of {entry.plugin})" if entry.plugin else ""
+    try:
+        obj = importlib.import_module(module)
+        for part in attr.split("."):
+            obj = getattr(obj, part)
+    except Exception as err:  # noqa: BLE001 - the plugin's (or our) module failed to import
+        raise InputError("--agent", name, f"cannot load {entry.target}{where} ({type(err).__name__}: {err})",
+                         "reinstall the package that provides it, or fix its module") from None
+    if not callable(obj):
+        raise InputError("--agent", name, f"{entry.target}{where} is not callable", "name the agent class")
+    return obj
 
 
 def _qualname(obj: object) -> str:
@@ -101,16 +140,38 @@ unregister = REGISTRY.unregister
 #: registered name -> factory (the registry as a read-only mapping; the name older callers use)
 BUILTIN: Mapping[str, Callable[..., Agent]] = REGISTRY
 
-register("route-oracle", RouteOracle,
+#: the shipped checkpoints' folder (found without importing the learned agents)
+CHECKPOINTS_DIR = Path(__file__).resolve().parents[1] / "learn" / "checkpoints"
+
+register("route-oracle", "icrsumo.agents.privileged:RouteOracle",
          description="privileged: follows the scenario's route (an upper reference)")
-register("instruction-follower", InstructionFollower,
+register("instruction-follower", "icrsumo.agents.privileged:InstructionFollower",
          description="privileged: follows the instructions as a careful driver would")
-# learned agents whose checkpoints ship with the package (torch loads on first use)
-for _cls in (TokenAgent, NgramAgent, NgramAugAgent):
-    if (CHECKPOINTS / _cls.checkpoint).is_file():
-        _doc = (_cls.__doc__ or "").strip().splitlines()[0].removeprefix(f"``{_cls.name}``: ")
-        register(_cls.name, _cls, description=f"learned: {_doc.replace('``', '')}")
-del _cls, _doc
+# learned agents whose checkpoints ship with the package (ONNX Runtime loads on first use)
+for _name, _cls, _doc in (
+        ("bev-token", "TokenAgent", "word-token GRU language encoder, trained on baseline phrasings only."),
+        ("bev-ngram", "NgramAgent", "hashed character n-gram language encoder, baseline phrasings only."),
+        ("bev-ngram-aug", "NgramAugAgent", "as bev-ngram, trained with --augment-instructions.")):
+    if (CHECKPOINTS_DIR / f"{_name}.pt").is_file():
+        register(_name, f"icrsumo.learn.agent:{_cls}", description=f"learned: {_doc}")
+del _name, _cls, _doc
+
+
+def register_plugins(registry: AgentRegistry = REGISTRY) -> None:
+    """Register the agents that installed packages declare in the ``icrsumo.agents``
+    entry-point group, lazily (their modules are imported when the agent is asked for); a
+    name already taken or not a valid name is skipped and kept in ``skipped_plugins``."""
+    from importlib.metadata import entry_points
+
+    for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+        dist = getattr(getattr(ep, "dist", None), "name", "") or "?"
+        try:
+            registry.register(ep.name, ep.value, description=f"plugin ({dist})", plugin=dist)
+        except (ValueError, TypeError) as err:
+            registry.skipped_plugins.append((ep.name, dist, str(err)))
+
+
+register_plugins()
 
 #: the agent `icrsumo evaluate` uses when none is named (:data:`icrsumo.defaults.DEFAULT_AGENT`,
 #: where its checkpoint ships)

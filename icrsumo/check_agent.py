@@ -21,11 +21,11 @@ from typing import Any
 
 import numpy as np
 
-from ..cache import DEFAULT_ROUTE, DEFAULT_SUITE, bundled_route
-from ..errors import InputError, describe
-from .base import Action, AgentError, AgentTimeout, Observation, batch_hook, validate_action
-from .registry import BUILTIN, REMOTE_PREFIX, agent_factory, load_class
-from .watch import ThreadWatch
+from .agents.base import Action, AgentError, AgentTimeout, Observation, batch_hook, validate_action
+from .agents.registry import BUILTIN, REMOTE_PREFIX, agent_factory, load_class
+from .agents.watch import ThreadWatch
+from .cache import DEFAULT_ROUTE, DEFAULT_SUITE, bundled_route
+from .errors import InputError, describe
 
 #: decisions per run (0.1 s each)
 MAX_DECISIONS = 300
@@ -95,7 +95,7 @@ class _Run:
 
 def _drive(factory: Callable, caller: ThreadWatch, scenario, iset, timeout: float, max_decisions: int,
            keep_obs: int) -> _Run:
-    from ..sim.episode import Episode
+    from .sim.episode import Episode
 
     run = _Run([], [], [])
     try:
@@ -185,8 +185,8 @@ def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUIT
             return report()
     # 3. scenario and the first run
     sc_dir, instr = bundled_route(route, suite)
-    from ..instructions.store import read_instruction_sets
-    from ..scenario import read_scenario
+    from .instructions.store import read_instruction_sets
+    from .scenario import read_scenario
 
     scenario = read_scenario(sc_dir)
     iset = read_instruction_sets(instr)[0]
