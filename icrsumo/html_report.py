@@ -235,7 +235,8 @@ _JS = """
     var shown=0;
     document.querySelectorAll('section.route').forEach(function(s){
       var any=Array.prototype.some.call(s.querySelectorAll('tr[data-agent]'),function(r){
-        return !r.classList.contains('hidden')&&(r.dataset.family!=='baseline'||(o===''&&f===''));});
+        return !r.classList.contains('hidden')&&(r.dataset.family!=='baseline'||(o===''&&f==='')
+          ||(o!==''&&r.dataset.outcome===o));});
       s.classList.toggle('hidden',!any); if(any){shown++;}
     });
     document.getElementById('shown').textContent=shown;
@@ -297,8 +298,9 @@ def html_report(summary: dict, records: Sequence[EpisodeRecord], attribution: Ma
             f'<tr data-agent="{_e(f["agent"])}" data-family="{_e(f["family"])}" data-outcome="flipped">'
             f'<td class=l>{_e(f["agent"])}</td><td class=l><a href="#route-{_e(f["route_id"])}">'
             f'{_e(f["route_id"])}</a></td><td class=l>{_e(f["family"])}</td><td>{f["k"]}</td>'
-            f'<td class=l>{_e(f["termination"])}</td><td class=l>{_e(d.get("kind", ""))} at '
-            f'{d.get("pos", 0):.0f} m</td><td class=l>{_e(d.get("route_intent", ""))}</td>'
+            f'<td class=l>{_e(f["termination"])}</td><td class=l>'
+            f'{_e(d["kind"]) + " at " + format(d["pos"], ".0f") + " m" if d else "—"}</td>'
+            f'<td class=l>{_e(d.get("route_intent", ""))}</td>'
             f'<td class=l>{_e(d.get("executed") or d.get("outcome", ""))}</td>'
             f'<td class=l>{_e(ins.get("text", ""))}</td><td class=l>{_e(ins.get("template", ""))}</td></tr>')
     flips.append("</table>")

@@ -140,7 +140,7 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
     agent is rebuilt from the spec the folder's configuration records for it (``spec``
     overrides: for folders written before icrsumo recorded specs)."""
     from .agents.identity import fingerprint, short
-    from .agents.registry import agent_factory
+    from .agents.registry import PYTHON_PREFIX, agent_factory
     from .evaluation.run import read_config
     from .instructions.store import read_instruction_sets
     from .logs import dumps_log, loads_log
@@ -157,18 +157,22 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
                              f"crashed ({rec.message[:120]}), so it has no log to replay",
                              "rerun it with icrsumo evaluate --retry-crashed, then show it")
         stored_text = store.log(rec.agent, rec.route_id, rec.family, rec.k, rec.seed)
-        stored_fp = store.agent_fingerprints().get(agent, {""})
+        stored_fp = store.episode_fingerprint(rec.agent, rec.route_id, rec.family, rec.k, rec.seed)
     if stored_text is None:
         raise InputError(out / "results.sqlite", f"episode {agent}/{route}/{family}/{k}", "has no stored log",
                          "run it again into another --out folder")
     stored = loads_log(stored_text)
     entry = (cfg.get("agents") or {}).get(agent)
     spec = spec or (entry.get("spec") if isinstance(entry, dict) else None) or agent
+    if spec.startswith(PYTHON_PREFIX):
+        raise InputError("--agent", agent, f"was given to the Python API as an object ({spec}), which "
+                         "cannot be rebuilt from its name",
+                         "pass --spec module:Class (or path/file.py:Class)")
     factory = agent_factory(spec)
     fp = fingerprint(factory)
-    if fp not in stored_fp and "" not in stored_fp:
+    if stored_fp and fp != stored_fp:
         raise InputError("--agent", agent, f"the agent {spec} is now another agent (fingerprint {short(fp)}, "
-                         f"stored {short(sorted(stored_fp)[0])}): the replay would not be the stored "
+                         f"stored {short(stored_fp)}): the replay would not be the stored "
                          "episode",
                          "restore the agent's code or checkpoint as it was")
     sc = _scenario(out, cfg, route)

@@ -116,6 +116,16 @@ class ResultStore:
                 out.setdefault(agent, set()).add(fp or "")
         return out
 
+    def episode_fingerprint(self, agent: str, route_id: str, family: str, k: int, seed: int) -> str:
+        """The fingerprint stored with one episode ("" when it has none or is not stored)."""
+        if "fingerprint" not in self._cols:
+            return ""
+        with self._guard("reading"):
+            key = (agent, route_id, str(family), k, seed)
+            row = self._db.execute("SELECT fingerprint FROM episodes WHERE agent=? AND route_id=? "
+                                   "AND family=? AND k=? AND seed=?", key).fetchone()
+        return (row[0] or "") if row else ""
+
     def check_agents(self, fingerprints: Mapping[str, str], replace: Collection[str] = ()) -> list[str]:
         """An InputError when an agent of ``fingerprints`` (name -> fingerprint) has stored
         episodes of another fingerprint and is not in ``replace``; returns the names whose

@@ -22,6 +22,7 @@ from __future__ import annotations
 import ast
 import hashlib
 import inspect
+import pickle
 import sysconfig
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -53,12 +54,17 @@ def fingerprint(factory: Callable[..., Any]) -> str:
     """The fingerprint of the agents ``factory`` makes (a class, a function, an
     :class:`~icrsumo.agents.registry.OnDevice` wrapper or a remote factory)."""
     target = getattr(factory, "agent_class", factory)  # OnDevice: the wrapped class
-    declared = _declared(factory) or _declared(target)
+    instance = vars(factory).get("instance") if hasattr(factory, "__dict__") else None
+    fn = vars(factory).get("fn") if hasattr(factory, "__dict__") else None
+    declared = (_declared(instance, plain=True) if instance is not None else None) or \
+        (_declared(fn, plain=True) if fn is not None else None) or _declared(factory) or _declared(target)
     if declared:
         return declared if declared.startswith(_PREFIX) and len(declared) == 71 else of_text(declared)
-    checkpoint = getattr(target, "checkpoint", None)
-    if isinstance(checkpoint, (str, Path)) and str(checkpoint) and Path(checkpoint).is_file():
-        return of_file(checkpoint)
+    for holder in (instance, target):  # an instance's own checkpoint, else the class's
+        for attr in ("checkpoint", "path"):
+            checkpoint = getattr(holder, attr, None) if holder is not None else None
+            if isinstance(checkpoint, (str, Path)) and str(checkpoint) and Path(checkpoint).is_file():
+                return of_file(checkpoint)
     files = sorted(set(_source_files(target)) | set(_source_files(getattr(factory, "fn", None))))
     qualname = getattr(target, "__qualname__", repr(target))
     if not files:  # no source to read (a C extension, a class typed in a REPL): its full name
@@ -67,10 +73,20 @@ def fingerprint(factory: Callable[..., Any]) -> str:
     h.update(qualname.encode() + b"\0")
     for f in files:  # by file name and bytes: the same files in another folder are the same agent
         h.update(Path(f).name.encode() + b"\0" + Path(f).read_bytes() + b"\0")
+    if instance is not None:  # an instance given to the Python API: its settings too
+        try:
+            h.update(pickle.dumps(instance, protocol=4))
+        except Exception:  # noqa: BLE001 - an unpicklable instance is known by its class
+            h.update(b"unpicklable")
     return _PREFIX + h.hexdigest()
 
 
-def _declared(obj: object) -> str | None:
+def _declared(obj: object, plain: bool = False) -> str | None:
+    """A declared ``fingerprint`` string of ``obj`` (``plain``: read as an instance's attribute;
+    else statically, so that a wrapper's forwarding does not count)."""
+    if plain:
+        value = getattr(obj, "fingerprint", None)
+        return value if isinstance(value, str) and value.strip() else None
     value = inspect.getattr_static(obj, "fingerprint", None) if obj is not None else None
     if isinstance(value, property):
         try:

@@ -17,6 +17,7 @@ device="cpu")``) is built on another device with ``agent_factory(spec, device="c
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import importlib.util
 import inspect
@@ -166,7 +167,7 @@ def register_plugins(registry: AgentRegistry = REGISTRY) -> None:
     for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
         dist = getattr(getattr(ep, "dist", None), "name", "") or "?"
         try:
-            registry.register(ep.name, ep.value, description=f"plugin ({dist})", plugin=dist)
+            registry.register(ep.name, f"{ep.module}:{ep.attr}", description=f"plugin ({dist})", plugin=dist)
         except (ValueError, TypeError) as err:
             registry.skipped_plugins.append((ep.name, dist, str(err)))
 
@@ -332,6 +333,10 @@ def python_agent(obj: object, where: str = "agents") -> tuple[str, Callable[...,
             factory = FunctionFactory(obj, agent_name(_qualname(obj), probe), cls,
                                       bool(getattr(probe, "privileged", False)),
                                       bool(getattr(probe, "needs_route", False)))
+            if callable(getattr(probe, "close", None)):  # the probe holds nothing for the run
+                with contextlib.suppress(Exception):
+                    probe.close()
+            del probe
         missing = [m for m in ("reset", "act") if not callable(getattr(cls, m, None))]
         if missing:
             raise InputError(where, _qualname(obj), f"does not make agents of the agent protocol (missing "

@@ -55,12 +55,17 @@ def resolve_agents(specs: tuple) -> dict[str, Callable]:
     making agents, an instance: the Python API) is keyed by its label
     (:func:`icrsumo.agents.registry.python_agent`)."""
     out: dict[str, Callable] = {}
+    seen: dict[int, str] = {}  # id of an object given -> its label (the same object twice runs once)
     for i, spec in enumerate(specs):
         if isinstance(spec, str):
             out.setdefault(spec, agent_factory(spec))
-        else:
+        elif id(spec) not in seen:
             label, factory = python_agent(spec, f"agents[{i}]")
-            out.setdefault(label, factory)
+            base, n = label, 2
+            while label in out:  # another object of the same class or name: its own label
+                label, n = f"{base} #{n}", n + 1
+            seen[id(spec)] = label
+            out[label] = factory
     return out
 
 

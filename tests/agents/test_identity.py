@@ -123,3 +123,29 @@ def test_rows_stored_before_fingerprints_are_taken_as_the_agents(tmp_path):
         assert store.check_agents({"keyword": "sha256:" + "c" * 64}) == ["keyword"]
         assert store.claim_agents({"keyword": "sha256:" + "c" * 64}, replace=("keyword",)) == []
         assert store.keys() == set()
+
+
+class Tuned:
+    """An agent whose settings live on the instance."""
+
+    name = "tuned"
+    privileged = False
+
+    def __init__(self, gain: float, fingerprint: str | None = None) -> None:
+        self.gain = gain
+        if fingerprint:
+            self.fingerprint = fingerprint
+
+    def reset(self, info):
+        pass
+
+    def act(self, obs):
+        return None
+
+
+def test_instances_are_known_by_their_settings_and_their_own_fingerprint():
+    from icrsumo.agents.registry import InstanceFactory
+
+    assert fingerprint(InstanceFactory(Tuned(1.0))) == fingerprint(InstanceFactory(Tuned(1.0)))
+    assert fingerprint(InstanceFactory(Tuned(1.0))) != fingerprint(InstanceFactory(Tuned(2.0)))
+    assert fingerprint(InstanceFactory(Tuned(1.0, "v1"))) != fingerprint(InstanceFactory(Tuned(1.0, "v2")))

@@ -41,18 +41,19 @@ def make_fast():
 
 
 def test_classes_functions_instances_and_specs_in_one_run(tmp_path):
-    slow = Cruise(3.0, name="cruise-slow")
+    slow, mid = Cruise(3.0, name="cruise-slow"), Cruise(4.0, name="cruise-mid")  # two instances of one class
     kw = dict(suite="tiny", families="misleading", k=1, routes=["tiny_003"], out=tmp_path, workers=2)
-    run = icrsumo.evaluate(agents=[Cruise, make_fast, slow, "route-oracle"], **kw)
-    assert (run.episodes, run.done, run.crashed) == (8, 8, 0)
-    assert set(run.summary["agents"]) == {"cruise", "cruise-fast", "cruise-slow", "route-oracle"}
+    run = icrsumo.evaluate(agents=[Cruise, make_fast, slow, mid, "route-oracle"], **kw)
+    assert (run.episodes, run.done, run.crashed) == (10, 10, 0)
+    assert set(run.summary["agents"]) == {"cruise", "cruise-fast", "cruise-slow", "cruise-mid",
+                                          "route-oracle"}
     assert slow.resets == 0  # every episode drove a fresh copy of the instance
     agents = json.loads((tmp_path / "config.json").read_text())["agents"]
     assert agents["cruise"]["spec"].startswith("python:") and agents["cruise"]["spec"].endswith("Cruise")
     with icrsumo.store.ResultStore(tmp_path / "results.sqlite") as store:
         took = {r.agent: r.duration for r in store.records() if r.family == "baseline"}
     assert took["cruise-slow"] > took["cruise"] > took["cruise-fast"]  # three speeds, three agents driven
-    again = icrsumo.evaluate(agents=[Cruise, make_fast, slow, "route-oracle"], **kw)
+    again = icrsumo.evaluate(agents=[Cruise, make_fast, slow, mid, "route-oracle"], **kw)
     assert again.ran == 0 and again.summary == run.summary
 
 
