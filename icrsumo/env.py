@@ -284,9 +284,9 @@ class ICRDriveEnv(gym.Env):
         if ep.route.length > 0:
             reward -= 100.0 * (out_m - self._out_prev) / ep.route.length
         self._out_prev = out_m
-        info: dict[str, Any] = {"t": (obs or self._obs).t, "progress": ep.progress,
-                                "route_length": ep.route.length,
-                                "instruction_id": (obs or self._obs).instruction_id,
+        seen = obs if obs is not None else self._obs  # at the end, the last observation stands
+        info: dict[str, Any] = {"t": seen.t, "progress": ep.progress, "route_length": ep.route.length,
+                                "instruction_id": seen.instruction_id,
                                 "infractions_so_far": len(infractions)}
         terminated = truncated = False
         if obs is None:

@@ -315,6 +315,7 @@ def html_report(summary: dict, records: Sequence[EpisodeRecord], attribution: Ma
         route_sets = sets(route)
         loaded = [(r, logs(r)) for r in recs if r.status == "done"]
         loaded = [(r, log) for r, log in loaded if log is not None]
+        log_of = {id(r): log for r, log in loaded}
         base_logs = {r.agent: log for r, log in loaded if r.family == Family.BASELINE}
         base_keys = {(r.agent, r.route_id, str(r.family), r.k, r.seed) for r, _ in loaded
                      if r.family == Family.BASELINE}
@@ -326,7 +327,7 @@ def html_report(summary: dict, records: Sequence[EpisodeRecord], attribution: Ma
         for r in recs:
             key = (r.agent, r.route_id, str(r.family), r.k, r.seed)
             kind = outcome(r, key in flipped)
-            log = next((lg for rr, lg in loaded if rr is r), None)
+            log = log_of.get(id(r))
             iset = route_sets.get((str(r.family), r.k))
             texts = {i.id: i.rendered() for i in iset.instructions} if iset is not None else {}
             if r.status != "done":

@@ -176,10 +176,11 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
                          "episode",
                          "restore the agent's code or checkpoint as it was")
     sc = _scenario(out, cfg, route)
-    sets = {(s.family, s.k): s for s in read_instruction_sets(_instructions(out, rec))}
+    instr_file = _instructions(out, rec)
+    sets = {(s.family, s.k): s for s in read_instruction_sets(instr_file)}
     iset = sets.get((rec.family, rec.k))
     if iset is None:
-        raise InputError(_instructions(out, rec), f"{family} k={k}", "the instruction sequence is missing",
+        raise InputError(instr_file, f"{family} k={k}", "the instruction sequence is missing",
                          "restore the out folder's instruction files")
     moment_t, moment = failure_moment(stored, scoring)
     dest = Path(dest) if dest is not None else out / "show" / safe_name(f"{agent}_{route}_{family}_{k}")

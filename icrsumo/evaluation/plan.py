@@ -77,7 +77,8 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None)
         if not isinstance(old, dict):
             raise InputError(path, "", "is not a JSON object", "restore it, or use another --out folder")
         diff = [k for k in compared if old.get(k) != compared[k]]
-        grown = [int(x) for x in old.get("k_grown_from", []) if isinstance(x, int)]
+        history = old.get("k_grown_from")
+        grown = [x for x in history if isinstance(x, int)] if isinstance(history, list) else []
         if diff == ["k"] and isinstance(old.get("k"), int) and opts.k > old["k"]:
             grown, diff = [*grown, old["k"]], []  # a larger --k adds the missing variants
         if grown:
