@@ -27,7 +27,10 @@ Definitions (per agent and family f; crashed episodes are counted and excluded f
   dropped) of the per-route mean dDS against 0, Holm-Bonferroni-corrected over the families
   of the agent (``p_value_raw``: uncorrected); 1.0 when every route's dDS is 0;
 - flips: {"lost": pairs (route, k) whose baseline terminated "done" and whose variant did
-  not, "gained": the reverse}.
+  not, "gained": the reverse};
+- model_calls, invalid_answers, invalid_rate (only for an agent that asked a language model,
+  :mod:`icrsumo.agents.llm`): its questions over the complete pairs' variant episodes (the
+  baseline row: over its episodes), the invalid answers among them, and their share.
 
 Values are rounded (4 decimals, IS and dIS 6); a quantity without data is ``None``, never NaN.
 """
@@ -108,8 +111,16 @@ def bootstrap_ci(route_means: np.ndarray, *, n_boot: int, seed: int,
     return np.percentile(boots, [100.0 * alpha, 100.0 * (1.0 - alpha)], axis=0)
 
 
+def _answers(recs: Sequence[EpisodeRecord]) -> dict[str, Any]:
+    """Model calls, invalid answers and their share over ``recs``."""
+    calls = sum(r.model_calls for r in recs)
+    bad = sum(r.invalid_answers for r in recs)
+    return {"model_calls": calls, "invalid_answers": bad,
+            "invalid_rate": _rnd(bad / calls) if calls else None}
+
+
 def _family_block(recs: list[EpisodeRecord], base: dict[_Key, EpisodeRecord], *,
-                  n_boot: int, boot_seed: int, n_crashed: int = 0) -> dict[str, Any]:
+                  n_boot: int, boot_seed: int, n_crashed: int = 0, answers: bool = False) -> dict[str, Any]:
     paired = [r for r in recs if (r.route_id, r.seed) in base]
     block = _absolute(paired)
     pair_base = [base[(r.route_id, r.seed)] for r in paired]  # one baseline per pair
@@ -152,6 +163,8 @@ def _family_block(recs: list[EpisodeRecord], base: dict[_Key, EpisodeRecord], *,
         n_crashed=int(n_crashed), unpaired=len(recs) - len(paired),
         flips={"lost": lost, "gained": gained},
     )
+    if answers:
+        out.update(_answers(paired))
     return out
 
 
@@ -207,12 +220,14 @@ def summarize(records: Iterable[EpisodeRecord], *, suite: str, seed: int, k: int
         mine = [r for r in recs if r.agent == agent and r.status != "crashed"]
         base_recs = [r for r in mine if r.family == BASELINE]
         base = {(r.route_id, r.seed): r for r in base_recs if r.k == 0}
+        answers = any(r.model_calls for r in mine)
         blocks = {f: _family_block([r for r in mine if r.family == f], base, n_boot=n_boot,
-                                   boot_seed=boot_seed, n_crashed=crashed[f]) for f in fams}
+                                   boot_seed=boot_seed, n_crashed=crashed[f], answers=answers) for f in fams}
         adjusted = holm([blocks[f]["p_value_raw"] for f in fams])
         for f, p in zip(fams, adjusted):
             blocks[f]["p_value"] = _rnd(p, 6)
-        agents[agent] = {"baseline": {**_absolute(base_recs), "n_crashed": crashed[BASELINE]},
+        agents[agent] = {"baseline": {**_absolute(base_recs), "n_crashed": crashed[BASELINE],
+                                      **(_answers(base_recs) if answers else {})},
                          "families": blocks}
     return {
         "suite": str(suite),

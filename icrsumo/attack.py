@@ -33,6 +33,7 @@ from .evaluation.options import EvalOptions
 from .evaluation.plan import Job, plan_jobs, prepare_suite
 from .evaluation.progress import Progress
 from .evaluation.run import (
+    bind_agents,
     check_agents,
     claim_agents,
     identify_agents,
@@ -175,6 +176,7 @@ def run_attack(opts: AttackOptions) -> dict:
     names = dict(ids.names)
     out = Path(opts.out)
     check_agents(out / "results.sqlite", ids, opts.replace_agents)
+    factories = bind_agents(factories, out)
     prep = prepare_suite(eopts, ids.config())
     for line in prep.skipped:
         print(f"icrsumo: skipped: {line}", file=sys.stderr)

@@ -5,7 +5,9 @@ followed_route / followed_text / other / not_reached), ``compliance`` (of the re
 whose text names another branch than the route's, the share where the ego took the text's:
 override susceptibility; None when there is none), ``adherence`` (of the reached decisions,
 the share passed on the route) and ``confusion`` (instructed intent -> executed branch ->
-count, reached decisions only).
+count, reached decisions only); for an agent that asks a language model, ``answers``
+(instructed intent -> the maneuver the model answered when the instruction came -> count):
+what the model understood, apart from what the car then did.
 
 First-divergence attribution: every variant episode that failed (its termination class not
 done) where its route's baseline completed is a *flip*; its row names the decision at which
@@ -102,10 +104,22 @@ def template_ranking(flip_rows: Sequence[dict], decisions: Mapping[Key, Sequence
     return sorted(rows, key=lambda r: (-r["flips"], -(r["flip_rate"] or 0.0), r["family"], r["template"]))
 
 
+def answer_confusion(pairs: Iterable[Sequence[tuple[Any, Any]]]) -> dict[str, dict[str, int]]:
+    """Instructed intent -> answered maneuver -> count over episodes' (intent, maneuver) pairs."""
+    table: dict[str, Counter] = {}
+    for episode in pairs:
+        for intent, maneuver in episode:
+            table.setdefault(str(intent), Counter())[str(maneuver)] += 1
+    return {t: dict(sorted(c.items())) for t, c in sorted(table.items())}
+
+
 def attach(summary: dict, records: Sequence[EpisodeRecord],
-           decisions: Mapping[Key, Sequence[Decision]]) -> dict:
-    """Add the decision statistics to every block of ``summary`` (in place, returned) and
-    return the attribution document: {"flips": [...], "templates": [...]}."""
+           decisions: Mapping[Key, Sequence[Decision]],
+           answers: Mapping[Key, Sequence[tuple[Any, Any]]] | None = None) -> dict:
+    """Add the decision statistics (and, for a language-model agent's blocks, the answers'
+    confusion from ``answers``: key -> (instructed intent, maneuver) pairs) to every block of
+    ``summary`` (in place, returned) and return the attribution document: {"flips": [...],
+    "templates": [...]}."""
     for agent, a in summary["agents"].items():
         for fam, block in [(Family.BASELINE, a["baseline"]), *a["families"].items()]:
             eps = [decisions[_key(r)] for r in records
@@ -116,5 +130,8 @@ def attach(summary: dict, records: Sequence[EpisodeRecord],
             block["confusion"] = stats["confusion"]
             if fam != Family.BASELINE:
                 block["compliance"] = stats["compliance"]
+            if "invalid_rate" in block and answers is not None:
+                mine = [r for r in records if r.agent == agent and r.family == fam]
+                block["answers"] = answer_confusion(answers[_key(r)] for r in mine if _key(r) in answers)
     rows = flips(records, decisions)
     return {"flips": rows, "templates": template_ranking(rows, decisions)}

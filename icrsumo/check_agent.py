@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from .agents.base import Action, AgentError, AgentTimeout, Observation, batch_hook, validate_action
-from .agents.registry import BUILTIN, REMOTE_PREFIX, agent_factory, load_class
+from .agents.registry import BUILTIN, LLM_PREFIX, REMOTE_PREFIX, agent_factory, load_class
 from .agents.watch import ThreadWatch
 from .cache import DEFAULT_ROUTE, DEFAULT_SUITE, bundled_route
 from .errors import InputError, describe
@@ -167,7 +167,7 @@ def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUIT
         return CheckReport(spec, route, tuple(found))
 
     # 1. load
-    if spec in BUILTIN or spec.startswith(REMOTE_PREFIX):
+    if spec in BUILTIN or spec.startswith((REMOTE_PREFIX, LLM_PREFIX)):
         factory = agent_factory(spec)
         found.append(Finding(True, f"{spec}: loaded"))
         cls = factory if isinstance(factory, type) else None

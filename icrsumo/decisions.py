@@ -146,3 +146,19 @@ def divergence(decisions: Sequence[Decision]) -> Decision | None:
     if left is not None:
         return left
     return next((d for d in decisions if d.outcome == DecisionOutcome.NOT_REACHED), None)
+
+
+def answer_pairs(iset: InstructionSet, log: EpisodeLog) -> tuple[tuple[Intent, Intent], ...]:
+    """(instructed intent, answered maneuver) of every question a language-model agent asked
+    when its instruction changed (``log.model_calls`` with ``at`` "instruction"); the
+    instructed intent is the instruction's text classified, as for :class:`Decision`."""
+    from .instructions.intent import classify_intent
+
+    by_id = {ins.id: ins for ins in iset.instructions}
+    out = []
+    for c in log.model_calls:
+        ins = by_id.get(c.instruction_id)
+        if c.at == "instruction" and ins is not None:
+            out.append((classify_intent(ins.rendered()), c.maneuver))
+    return tuple(out)
+

@@ -26,8 +26,16 @@ from typing import Any
 
 from icrsumo.errors import InputError, short
 from icrsumo.fsio import dumps_json, read_text, write_atomic
-from icrsumo.types import TERMINATIONS, EpisodeLog, EpisodeResult, Event, Infraction, TerminationClass
-from icrsumo.vocab import EventKind, Family, Termination
+from icrsumo.types import (
+    TERMINATIONS,
+    EpisodeLog,
+    EpisodeResult,
+    Event,
+    Infraction,
+    ModelCall,
+    TerminationClass,
+)
+from icrsumo.vocab import EventKind, Family, Intent, Termination
 
 LOG_VERSION = 2
 
@@ -53,7 +61,10 @@ OPTIONAL_COLUMNS = ("traffic_speed", "speed_limit")
 EVENT_FIELDS: dict[str, int | None] = {"kind": None, "t": 3, "pos": 2, "other": None, "x": 2, "y": 2}
 
 _HEADER = ("version", "route_id", "agent", "family", "k", "seed", "step_length", "route_length",
-           "termination", "termination_t", "message", "route", "steps", "events")
+           "termination", "termination_t", "message", "route", "steps", "events", "model_calls")
+
+#: the fields of one entry of ``model_calls`` (an object each), in stored order
+CALL_FIELDS = ("t", "instruction_id", "at", "key", "prompt", "answer", "maneuver", "valid", "problem")
 
 #: largest value of the per-step ``outside`` bits (OFF_LANES | WRONG_LANE | their 2.0 twins)
 _OUTSIDE_MAX = 15
@@ -102,7 +113,35 @@ def log_to_dict(log: EpisodeLog) -> dict[str, Any]:
                   + ([_r(p[2], 4, f"route[{i}]")] if len(p) > 2 else []) for i, p in enumerate(log.route)],
         "steps": steps,
         "events": events,
+        **({"model_calls": [_call_to_dict(c, i) for i, c in enumerate(log.model_calls)]}
+           if log.model_calls else {}),
     }
+
+
+def _call_to_dict(c: ModelCall, i: int) -> dict[str, Any]:
+    return {"t": _r(c.t, 3, f"model_calls[{i}].t"), "instruction_id": int(c.instruction_id), "at": c.at,
+            "key": c.key, "prompt": c.prompt, "answer": c.answer, "maneuver": str(c.maneuver),
+            "valid": bool(c.valid), "problem": c.problem}
+
+
+def _calls_from(rd: _Reader, raw: Any) -> tuple[ModelCall, ...]:
+    if not isinstance(raw, list):
+        raise rd.fail("model_calls", f"expected a list, got {type(raw).__name__}")
+    out = []
+    for i, c in enumerate(raw):
+        at = f"model_calls[{i}]"
+        if not isinstance(c, dict) or set(c) != set(CALL_FIELDS):
+            raise rd.fail(at, f"expected an object with keys {', '.join(CALL_FIELDS)}")
+        if not isinstance(c["valid"], bool):
+            raise rd.fail(f"{at}.valid", f"expected true or false, got {short(c['valid'])}")
+        out.append(ModelCall(
+            t=rd.number(c["t"], f"{at}.t"),
+            instruction_id=rd.integer(c["instruction_id"], f"{at}.instruction_id"),
+            at=rd.string(c["at"], f"{at}.at"), key=rd.string(c["key"], f"{at}.key"),
+            prompt=rd.string(c["prompt"], f"{at}.prompt"), answer=rd.string(c["answer"], f"{at}.answer"),
+            maneuver=rd.choice(c["maneuver"], Intent, f"{at}.maneuver", "maneuver"), valid=c["valid"],
+            problem=rd.string(c["problem"], f"{at}.problem")))
+    return tuple(out)
 
 
 def _key(name: str) -> str:
@@ -253,6 +292,7 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
         route=tuple(route),
         traffic_speed=cols["traffic_speed"],
         speed_limit=cols["speed_limit"],
+        model_calls=_calls_from(rd, d["model_calls"]) if "model_calls" in d else (),
     )
 
 

@@ -504,7 +504,12 @@ def map_view_png(renderer: BevRenderer, x: float, y: float, yaw: float,
     """PNG bytes of the BEV's static map layers with the ego at (x, y, yaw) (m, rad) and no
     other actor: what the report shows where the episode log holds the ego's poses only."""
     raster = renderer.render((x, y, yaw), size, None, None, {})
-    ok, buf = cv2.imencode(".png", cv2.cvtColor(to_rgb(raster), cv2.COLOR_RGB2BGR))
+    return png_bytes(to_rgb(raster))
+
+
+def png_bytes(rgb: np.ndarray) -> bytes:
+    """PNG bytes of an (H, W, 3) uint8 RGB image (the same pixels give the same bytes)."""
+    ok, buf = cv2.imencode(".png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
     if not ok:
         raise OSError("cannot encode a PNG")
     return buf.tobytes()

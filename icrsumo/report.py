@@ -27,6 +27,20 @@ _CSV_HEADER = ("agent", "family", "n", "n_routes", "DS", "RC", "IS", "dDS", "dDS
                "baseline_done_variant_failed", "n_crashed", "unpaired", "base_DS", "base_RC", "base_IS")
 
 
+#: the column an evaluation with a language-model agent adds (icrsumo.agents.llm)
+_ANSWERS_HEADER = "invalid %"
+_ANSWERS_CSV = ("model_calls", "invalid_answers", "invalid_rate")
+
+
+def has_answers(summary: dict) -> bool:
+    """Whether an agent of ``summary`` asked a language model (its rows carry invalid_rate)."""
+    return any("invalid_rate" in a["baseline"] for a in summary["agents"].values())
+
+
+def _answer_cell(b: dict, none: str) -> str:
+    return _pct(b.get("invalid_rate"), none)
+
+
 def _rows(summary: dict) -> list[tuple[str, str, dict]]:
     """(agent, family, block) for every table row: the baseline row first, then each family."""
     out = []
@@ -104,6 +118,9 @@ def _csv_text(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
 def table_cells(summary: dict) -> tuple[tuple[str, ...], list[tuple[str, str, list[str]]]]:
     """The results table as text cells: its header and one (agent, family, cells) per row, as
     the markdown table shows them."""
+    if has_answers(summary):
+        return (*_HEADER, _ANSWERS_HEADER), [(agent, fam, [*_cells(fam, b, "—"), _answer_cell(b, "—")])
+                                             for agent, fam, b in _rows(summary)]
     return _HEADER, [(agent, fam, _cells(fam, b, "—")) for agent, fam, b in _rows(summary)]
 
 
@@ -112,10 +129,15 @@ def tables(summary: dict) -> dict[str, str]:
     baseline row first per agent. Markdown/LaTeX show DS, RC, deltas with 1 decimal, IS with 3,
     RD/TO in % of the family's episodes; CSV has the unrounded summary numbers."""
     rows = _rows(summary)
+    answers = has_answers(summary)
 
-    md = ["| " + " | ".join(_HEADER) + " |", "|" + "|".join(["---"] * 2 + ["---:"] * 11) + "|"]
+    def extra(b: dict, none: str) -> list[str]:
+        return [_answer_cell(b, none)] if answers else []
+
+    header = (*_HEADER, _ANSWERS_HEADER) if answers else _HEADER
+    md = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * 2 + ["---:"] * (len(header) - 2)) + "|"]
     for agent, fam, b in rows:
-        md.append("| " + " | ".join([agent, fam] + _cells(fam, b, "—")) + " |")
+        md.append("| " + " | ".join([agent, fam] + _cells(fam, b, "—") + extra(b, "—")) + " |")
     note = crash_note(summary)
     if note:
         md += ["", note]
@@ -134,24 +156,27 @@ def tables(summary: dict) -> dict[str, str]:
             None if base else b["baseline_done_variant_failed"], b.get("n_crashed", 0),
             None if base else b.get("unpaired", 0), None if base else b.get("base_DS"),
             None if base else b.get("base_RC"), None if base else b.get("base_IS"),
-        ])
+        ] + ([b.get(c) for c in _ANSWERS_CSV] if answers else []))
 
     tex_head = ["Agent", "Family", "DS", "RC", "IS", r"$\Delta$DS [95\% CI]", r"$\Delta$RC [95\% CI]",
                 r"$\Delta$IS", r"worst $\Delta$DS", r"RD \%", r"TO \%", "n", "crashed"]
-    tex = [r"\begin{tabular}{ll" + "r" * 11 + "}", r"\toprule", " & ".join(tex_head) + r" \\", r"\midrule"]
+    tex_head += [r"invalid \%"] if answers else []
+    tex = [r"\begin{tabular}{ll" + "r" * (len(tex_head) - 2) + "}", r"\toprule",
+           " & ".join(tex_head) + r" \\", r"\midrule"]
     prev = None
     for agent, fam, b in rows:
         if prev is not None and agent != prev:
             tex.append(r"\midrule")
         cells = [_tex_escape(agent) if agent != prev else "", _tex_escape(fam)]
-        cells += [_tex_num(c) for c in _cells(fam, b, "—")]
+        cells += [_tex_num(c) for c in _cells(fam, b, "—") + extra(b, "—")]
         tex.append(" & ".join(cells) + r" \\")
         prev = agent
     tex += [r"\bottomrule", r"\end{tabular}"]
     if note:
         tex.append("% " + note)
 
-    return {"md": "\n".join(md) + "\n", "csv": _csv_text(_CSV_HEADER, csv_rows), "tex": "\n".join(tex) + "\n"}
+    csv_header = (*_CSV_HEADER, *_ANSWERS_CSV) if answers else _CSV_HEADER
+    return {"md": "\n".join(md) + "\n", "csv": _csv_text(csv_header, csv_rows), "tex": "\n".join(tex) + "\n"}
 
 
 _STATS_HEADER = ("Agent", "Family", "routes", "ΔDS", "rel. drop DS %", "rel. drop RC %", "p (Holm)",

@@ -170,6 +170,8 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
                          "pass --spec module:Class (or path/file.py:Class)")
     factory = agent_factory(spec)
     fp = fingerprint(factory)
+    if callable(getattr(type(factory), "bind", None)):  # an LLM agent: answered from OUT/llm-cache
+        factory = factory.bind(out)
     if stored_fp and fp != stored_fp:
         raise InputError("--agent", agent, f"the agent {spec} is now another agent (fingerprint {short(fp)}, "
                          f"stored {short(stored_fp)}): the replay would not be the stored "

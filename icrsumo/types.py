@@ -234,6 +234,27 @@ class Event:
 
 
 @dataclass(frozen=True)
+class ModelCall:
+    """One question an agent asked its language model during an episode, and the answer:
+    ``t`` (s) and the active ``instruction_id``; ``at``: what prompted it ("instruction": the
+    instruction changed, "junction": a junction with a choice came within reach); ``key``: the
+    SHA-256 of the exact request (its address in the response cache); ``prompt``: the user
+    message (instruction and scene); ``answer``: the model's answer text (cut to 500
+    characters; "" when there was none); ``maneuver``: what the agent did with it (follow for
+    an invalid answer); ``valid``; ``problem``: why an answer is invalid ("" when valid)."""
+
+    t: float
+    instruction_id: int
+    at: str
+    key: str
+    prompt: str
+    answer: str
+    maneuver: Intent
+    valid: bool
+    problem: str = ""
+
+
+@dataclass(frozen=True)
 class EpisodeLog:
     """Everything scoring needs from one closed-loop episode, serialisable to JSON.
 
@@ -250,6 +271,8 @@ class EpisodeLog:
     (:class:`icrsumo.termination.DenseRoute`). Per step too, for Leaderboard 2.0's rules:
     ``traffic_speed`` (m/s, mean speed of the other vehicles, -1 when there are none) and
     ``speed_limit`` (m/s, of the nearest driving lane); empty in logs that do not record them.
+    ``model_calls``: the agent's questions to a language model and their answers
+    (:class:`ModelCall`; empty for agents without one, and then absent from the JSON).
     ``termination`` is a
     :class:`Termination`; ``t`` strictly increases, ``progress`` never decreases, and the
     route timeout runs from ``t[0]``.
@@ -278,6 +301,7 @@ class EpisodeLog:
     route: tuple[tuple[float, ...], ...] = ()
     traffic_speed: tuple[float, ...] = ()
     speed_limit: tuple[float, ...] = ()
+    model_calls: tuple[ModelCall, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -321,6 +345,8 @@ class EpisodeRecord:
     ``termination_class`` is done, RD or TO; ``infractions`` holds (kind, factor) pairs;
     ``length`` (m) and ``duration`` (simulated s) describe the route and the episode;
     ``outside_m`` (m): the route advance made off the driving lanes or against the traffic.
+    ``model_calls`` / ``invalid_answers``: the agent's questions to a language model and how
+    many answers were invalid (0 for agents without one).
     """
 
     agent: str
@@ -340,3 +366,5 @@ class EpisodeRecord:
     attempts: int = 1
     message: str = ""
     outside_m: float = 0.0
+    model_calls: int = 0
+    invalid_answers: int = 0

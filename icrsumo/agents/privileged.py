@@ -711,7 +711,7 @@ class InstructionFollower(PathDriver):
             self._lane_carry = self._lane_goal if unfinished else None
             self._lane_goal = None
             self._instr_id = obs.instruction_id
-            self.intent = classify_intent(obs.instruction) if obs.instruction else Intent.FOLLOW
+            self.intent = self.interpret(obs)
             self._ring_named = bool(_RING_WORDS.search(obs.instruction or ""))
             self._spent = None
             # a new instruction before a junction is entered may name another branch there:
@@ -723,6 +723,11 @@ class InstructionFollower(PathDriver):
                 self._decided.pop(self.net.via_edges.get(lane, ("", ""))[1], None)
             elif lane:
                 self._decided.pop(_lane_edge(lane), None)
+
+    def interpret(self, obs: Observation) -> Intent:
+        """The maneuver the new active instruction asks for: the ``rules`` interpreter (the
+        intent classifier); :class:`icrsumo.agents.llm.LLMFollower` asks a language model."""
+        return classify_intent(obs.instruction) if obs.instruction else Intent.FOLLOW
 
     def preferred_lane(self, w: World, edge: str, lanes: tuple[int, ...], current: int) -> int:
         if self.intent in (Intent.LANE_LEFT, Intent.LANE_RIGHT) and self._instr_id not in self._lane_done:

@@ -2,8 +2,9 @@
 
 An agent is named by a *spec*: a registered name (the built-ins: ``route-oracle``,
 ``instruction-follower`` and the learned agents whose checkpoints ship), ``module:Class``,
-``path/file.py:Class`` or ``remote:http://HOST:PORT``. :func:`agent_factory` turns a spec into
-a zero-argument factory of fresh agents (InputErrors for bad specs).
+``path/file.py:Class``, ``remote:http://HOST:PORT`` or ``llm:MODEL@http://HOST:PORT/v1``.
+:func:`agent_factory` turns a spec into a zero-argument factory of fresh agents (InputErrors
+for bad specs).
 
 Names are registered explicitly with :func:`register`, which refuses a name that is already
 taken (as Gymnasium's environment registry and waymax's metric registry do)::
@@ -33,6 +34,9 @@ from .base import Agent
 
 #: ``remote:http://HOST:PORT``: an agent behind an icrsumo-agent/1 server (icrsumo.agents.remote)
 REMOTE_PREFIX = "remote:"
+#: ``llm:MODEL@http://HOST:PORT/v1``: the instruction-follower with a language model as its
+#: interpreter (icrsumo.agents.llm)
+LLM_PREFIX = "llm:"
 
 
 @dataclass(frozen=True)
@@ -218,8 +222,8 @@ def load_class(spec: str) -> type:
     target, _, cls_name = spec.rpartition(":")
     if not target or not cls_name:
         raise InputError("--agent", spec, "not a built-in agent nor MODULE:CLASS",
-                         f"use one of {', '.join(REGISTRY)}, a module:Class, path/file.py:Class or "
-                         "remote:http://HOST:PORT")
+                         f"use one of {', '.join(REGISTRY)}, a module:Class, path/file.py:Class, "
+                         "remote:http://HOST:PORT or llm:MODEL@http://HOST:PORT/v1")
     try:
         if target.endswith(".py"):
             path = Path(target)
@@ -266,6 +270,10 @@ def agent_factory(spec: str, device: str | None = None) -> Callable[[], Agent]:
         from .remote import remote_factory
 
         return remote_factory(spec[len(REMOTE_PREFIX):])
+    elif spec.startswith(LLM_PREFIX):
+        from .llm import llm_factory
+
+        return llm_factory(spec)
     else:
         factory = _import_class(spec)
     if device is not None and takes_device(factory):

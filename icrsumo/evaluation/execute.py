@@ -130,7 +130,9 @@ class EpisodeWorker:
             r = score_episode(loads_log(text), job.scoring)  # the stored log: a rescore gives the same
             rec = with_scores(EpisodeRecord(
                 agent=job.agent, route_id=job.route_id, family=job.family, k=job.k, seed=job.seed,
-                status=EpisodeStatus.DONE, length=round(sc.length, 2), message=log.message), r)
+                status=EpisodeStatus.DONE, length=round(sc.length, 2), message=log.message,
+                model_calls=len(log.model_calls),
+                invalid_answers=sum(not c.valid for c in log.model_calls)), r)
             return Outcome.finished(rec, text)
         except Interrupted:  # the user's Ctrl-C (in-process runs): stop the evaluation
             raise

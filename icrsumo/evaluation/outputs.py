@@ -31,7 +31,9 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     summary = summarize(records, suite=opts.suite, seed=opts.seed, k=opts.k, families=families)
     summary["scoring"] = opts.scoring
     ends: dict = {}
-    attribution = attach(summary, records, episode_decisions(store, records, instr_dir, ends))
+    answers: dict = {}
+    attribution = attach(summary, records, episode_decisions(store, records, instr_dir, ends, answers),
+                         answers)
     if rescored_short:
         summary["episodes"]["rescored_short"] = rescored_short
         print(f"icrsumo: note: {rescored_short} episodes ended, under the rules they were run with, "
@@ -111,13 +113,15 @@ def write_html(out: Path, summary: dict, records: list[EpisodeRecord], attributi
 
 
 def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_dir: Path,
-                      ends: dict | None = None) -> dict:
+                      ends: dict | None = None, answers: dict | None = None) -> dict:
     """Key -> the decisions (:func:`icrsumo.decisions.classify_decisions`) of every finished
     episode in ``records``, from its stored log and its route's instruction file; a route whose
     instruction file cannot be read, or an episode whose stored log is damaged, is left out and
     named on stderr. ``ends`` (filled when given): key -> where and when each episode ended and
-    the ids of its instruction texts (:data:`icrsumo.aggregate.END_COLUMNS`), read on the way."""
-    from ..decisions import classify_decisions
+    the ids of its instruction texts (:data:`icrsumo.aggregate.END_COLUMNS`), read on the way;
+    ``answers`` (filled when given): key -> a language-model agent's (instructed intent,
+    answered maneuver) pairs (:func:`icrsumo.decisions.answer_pairs`)."""
+    from ..decisions import answer_pairs, classify_decisions
     from ..instructions.store import read_route_file
 
     routes: dict[str, tuple | None] = {}
@@ -146,6 +150,8 @@ def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_di
         if log is not None:
             iset = route[1][(r.family, r.k)]
             out[(r.agent, r.route_id, str(r.family), r.k, r.seed)] = classify_decisions(route[0], iset, log)
+            if answers is not None and log.model_calls:
+                answers[(r.agent, r.route_id, str(r.family), r.k, r.seed)] = answer_pairs(iset, log)
             if ends is not None and log.t:
                 ends[(r.agent, r.route_id, r.family, r.k, r.seed)] = {
                     "instructions": "|".join(i.template or "baseline" for i in iset.instructions),

@@ -9,7 +9,14 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ..agents.registry import DEFAULT_AGENT, PYTHON_PREFIX, agent_factory, agent_name, python_agent
+from ..agents.registry import (
+    DEFAULT_AGENT,
+    LLM_PREFIX,
+    PYTHON_PREFIX,
+    agent_factory,
+    agent_name,
+    python_agent,
+)
 from ..errors import InputError, check_seed, expect
 from ..fsio import read_json
 from ..instructions.families import ALL_FAMILIES, FAMILIES
@@ -69,11 +76,19 @@ def resolve_agents(specs: tuple) -> dict[str, Callable]:
     return out
 
 
+def bind_agents(factories: Mapping[str, Callable], out: Path) -> dict[str, Callable]:
+    """``factories`` with each one that keeps state in the out folder (a ``bind(out)`` method:
+    an LLM agent's response cache) bound to ``out``; binding checks what such an agent needs
+    (its server, its API key variable), before anything is written."""
+    return {spec: f.bind(out) if callable(getattr(type(f), "bind", None)) else f
+            for spec, f in factories.items()}
+
+
 def with_factories(jobs: list[Job], factories: Mapping[str, Callable]) -> list[Job]:
-    """``jobs`` whose agent was given as a Python object carry its factory (the workers cannot
-    build it from a spec)."""
-    return [replace(j, factory=factories[j.agent_spec]) if j.agent_spec.startswith(PYTHON_PREFIX) else j
-            for j in jobs]
+    """``jobs`` whose agent was given as a Python object, or is bound to the out folder (an
+    LLM agent), carry its factory (the workers cannot build it from a spec)."""
+    return [replace(j, factory=factories[j.agent_spec])
+            if j.agent_spec.startswith((PYTHON_PREFIX, LLM_PREFIX)) else j for j in jobs]
 
 
 @dataclass(frozen=True)
@@ -152,6 +167,7 @@ def run_evaluation(opts: EvalOptions) -> EvalResult:
     names = ids.names
     out = Path(opts.out)
     check_agents(out / "results.sqlite", ids, opts.replace_agents)
+    factories = bind_agents(factories, out)
     prep = prepare_suite(opts, ids.config())
     written = set(prep.routes)
     jobs = with_factories([j for j in plan_jobs(opts, prep.scenarios, prep.instructions, names)

@@ -14,31 +14,36 @@ Standard library only.
 
 from __future__ import annotations
 
-import hashlib
-import http.client
-import ipaddress
 import json
 import re
-import socket
 import time
-import urllib.error
 import urllib.parse
-import urllib.request
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from ..fsio import dumps_json, write_atomic
+from ..llmio import (
+    CACHE_FORMAT,
+    Invalid,
+    ResponseCache,
+    Transport,
+    answer_text,
+    canonical,
+    chat_url,
+    exchange,
+    http_problem,
+    request_hash,
+)
 from ..types import Instruction, InstructionSet, Intent
 from .banks import CONTRADICTS
 from .families import FAMILIES
 
 PLACEHOLDER = "[x]"
 MAX_TEXT = 300                  # a variant text must be shorter than this (characters)
-MAX_RESPONSE_BYTES = 8 << 20    # larger HTTP bodies are rejected
+MAX_RESPONSE_BYTES = 8 << 20    # larger HTTP bodies are rejected (bytes)
 RETRY_BACKOFF = 0.5             # s slept before retrying after a transport failure (times attempt)
-CACHE_FORMAT = "icrsumo-llm-cache/1"
+__all__ = ["CACHE_FORMAT", "LLMConfig", "LLMError", "canonical", "llm_variants", "request_hash"]
 
 _UNCHECKED = (Intent.STOP, Intent.UNKNOWN)   # baseline intents without an intent check
 
@@ -156,132 +161,31 @@ def _with_problem(first: dict, problem: str) -> dict:
     return body
 
 
-def canonical(body: dict) -> bytes:
-    """Canonical JSON bytes of a request body (the bytes sent and hashed)."""
-    return json.dumps(body, sort_keys=True, separators=(",", ":"), ensure_ascii=False).encode("utf-8")
-
-
-def request_hash(body: dict) -> str:
-    return hashlib.sha256(canonical(body)).hexdigest()
-
-
 # ---------------------------------------------------------------------------------------------
-# transport
+# transport (icrsumo.llmio)
 
 
 class _Transport(Exception):
-    """A failed exchange. ``unreachable``: nothing answered at all; ``final``: retrying is useless."""
+    """A failed exchange. ``unreachable``: nothing answered at all."""
 
-    def __init__(self, message: str, unreachable: bool = False, final: bool = False) -> None:
+    def __init__(self, message: str, unreachable: bool = False) -> None:
         super().__init__(message)
         self.unreachable = unreachable
-        self.final = final
-
-
-def _url(endpoint: str) -> str:
-    base = endpoint.strip().rstrip("/")
-    if base.endswith("/chat/completions"):
-        return base
-    return base + "/chat/completions"
-
-
-def _is_loopback(url: str) -> bool:
-    host = urllib.parse.urlsplit(url).hostname or ""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
-def _read_bounded(resp: Any, deadline: float) -> bytes:
-    chunks: list[bytes] = []
-    size = 0
-    while True:
-        chunk = resp.read(65536)
-        if not chunk:
-            return b"".join(chunks)
-        size += len(chunk)
-        if size > MAX_RESPONSE_BYTES:
-            raise _Transport(f"response larger than {MAX_RESPONSE_BYTES} bytes")
-        chunks.append(chunk)
-        if time.monotonic() > deadline:
-            raise TimeoutError("timed out")
-
-
-def _reason(err: BaseException) -> tuple[str, bool]:
-    """A short reason for a transport failure, and whether the endpoint was unreachable."""
-    if isinstance(err, urllib.error.URLError) and isinstance(err.reason, BaseException):
-        err = err.reason
-    if isinstance(err, ConnectionRefusedError):
-        return "connection refused", True
-    if isinstance(err, socket.gaierror):
-        return f"host name not resolved: {err}", True
-    if isinstance(err, (TimeoutError, socket.timeout)):
-        return "timed out", False
-    if isinstance(err, urllib.error.URLError):
-        return f"{err.reason}", False
-    return f"{type(err).__name__}: {err}", False
 
 
 def _post(url: str, data: bytes, cfg: LLMConfig) -> tuple[int, bytes]:
     """POST ``data``; returns (HTTP status, body bytes). Transport failures raise _Transport."""
-    headers = {"Content-Type": "application/json", "Accept": "application/json"}
-    if cfg.api_key:
-        headers["Authorization"] = f"Bearer {cfg.api_key}"
-    req = urllib.request.Request(url, data=data, headers=headers, method="POST")
-    # A loopback server is always reached directly, whatever *_proxy variables say.
-    handlers = [urllib.request.ProxyHandler({})] if _is_loopback(url) else []
-    opener = urllib.request.build_opener(*handlers)
-    deadline = time.monotonic() + cfg.timeout
     try:
-        with opener.open(req, timeout=cfg.timeout) as resp:
-            return resp.status, _read_bounded(resp, deadline)
-    except urllib.error.HTTPError as err:
-        try:
-            raw = _read_bounded(err, deadline)
-        except (OSError, http.client.HTTPException, _Transport):
-            raw = b""
-        finally:
-            err.close()
-        return err.code, raw
-    except _Transport:
-        raise
-    except (urllib.error.URLError, http.client.HTTPException, OSError) as err:
-        reason, unreachable = _reason(err)
-        raise _Transport(reason, unreachable=unreachable) from err
-
-
-def _http_problem(status: int, raw: bytes) -> str:
-    detail = raw[:300].decode("utf-8", "replace")
-    try:
-        err = json.loads(raw)
-        if isinstance(err, dict):
-            inner = err.get("error", err)
-            detail = str(inner.get("message", inner) if isinstance(inner, dict) else inner)[:300]
-    except ValueError:
-        pass
-    detail = " ".join(detail.split())
-    return f"HTTP {status}" + (f": {detail}" if detail else "")
+        return exchange(url, data, api_key=cfg.api_key, timeout=cfg.timeout, limit=MAX_RESPONSE_BYTES)
+    except Transport as err:
+        raise _Transport(str(err), unreachable=err.unreachable) from err
 
 
 # ---------------------------------------------------------------------------------------------
 # validation
 
 
-class _Invalid(Exception):
-    """An answer that breaks the protocol; ``problems`` lists what is wrong."""
-
-    def __init__(self, problems: list[str]) -> None:
-        super().__init__("; ".join(problems))
-        self.problems = problems
-
-    @property
-    def summary(self) -> str:
-        shown = "; ".join(self.problems[:3])
-        more = len(self.problems) - 3
-        return shown + (f" (and {more} more problem(s))" if more > 0 else "")
+_Invalid = Invalid
 
 
 _FENCE = re.compile(r"```[ \t]*(?:json|JSON)?[ \t]*\r?\n?(.*?)```", re.DOTALL)
@@ -289,20 +193,8 @@ _FENCE = re.compile(r"```[ \t]*(?:json|JSON)?[ \t]*\r?\n?(.*?)```", re.DOTALL)
 
 def _content(raw: bytes) -> str:
     """``choices[0].message.content`` of a chat-completions response body."""
-    try:
-        body = json.loads(raw)
-    except ValueError as err:
-        raise _Invalid([f"response body is not JSON ({err})"]) from None
-    if not isinstance(body, dict):
-        raise _Invalid(["response body is not a JSON object"])
-    choices = body.get("choices")
-    if not isinstance(choices, list) or not choices or not isinstance(choices[0], dict):
-        raise _Invalid(["response has no choices[0]"])
-    message = choices[0].get("message")
-    content = message.get("content") if isinstance(message, dict) else None
-    if not isinstance(content, str) or not content.strip():
-        raise _Invalid(["response has no choices[0].message.content text"])
-    if choices[0].get("finish_reason") == "length":
+    content, reason = answer_text(raw)
+    if reason == "length":
         # Still parsed below; a truncated answer normally fails there with this hint.
         try:
             _parse_content(content)
@@ -423,28 +315,17 @@ def validate_answer(content: str, baseline: InstructionSet, family: str, k: int,
 
 
 def cache_path(cache_dir: Path, key: str) -> Path:
-    return Path(cache_dir) / key[:2] / f"{key}.json"
+    return ResponseCache(cache_dir).path(key)
 
 
-def _cache_load(path: Path, first: dict) -> str | None:
+def _cache_load(cache_dir: Path, key: str, first: dict) -> str | None:
     """The cached answer content for request ``first``, or None (missing, unreadable, other request)."""
-    try:
-        rec = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    if not isinstance(rec, dict) or rec.get("request") != first or not isinstance(rec.get("content"), str):
-        return None
-    return rec["content"]
+    rec = ResponseCache(cache_dir).get(key, first)
+    return rec["content"] if rec is not None and isinstance(rec.get("content"), str) else None
 
 
-def _cache_store(path: Path, key: str, first: dict, content: str, attempts: int) -> None:
-    write_atomic(path, dumps_json({
-        "format": CACHE_FORMAT,
-        "key": key,
-        "request": first,
-        "content": content,
-        "attempts": attempts,
-    }))
+def _cache_store(cache_dir: Path, key: str, first: dict, content: str, attempts: int) -> None:
+    ResponseCache(cache_dir).put(key, first, content=content, attempts=attempts)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -487,8 +368,7 @@ def llm_variants(baseline: InstructionSet, family: str, k: int, seed: int, cfg: 
     if not baseline.instructions:
         return _variant_sets(baseline, family, seed, cfg, key, [[] for _ in range(k)])
 
-    path = cache_path(cfg.cache_dir, key)
-    cached = _cache_load(path, first)
+    cached = _cache_load(cfg.cache_dir, key, first)
     if cached is not None:
         try:
             texts = validate_answer(cached, baseline, family, k, classify)
@@ -496,7 +376,7 @@ def llm_variants(baseline: InstructionSet, family: str, k: int, seed: int, cfg: 
         except _Invalid:
             pass   # e.g. the classifier changed since: ask again and overwrite
 
-    url = _url(cfg.endpoint)
+    url = chat_url(cfg.endpoint)
     if urllib.parse.urlsplit(url).scheme not in ("http", "https"):
         raise LLMError(f"route {rid}, family {family}: LLM endpoint {cfg.endpoint!r} is not an "
                        "http:// or https:// URL", rid, family, "bad endpoint")
@@ -515,7 +395,7 @@ def llm_variants(baseline: InstructionSet, family: str, k: int, seed: int, cfg: 
             problem = f"transport: {err}"
             continue
         if status != 200:
-            problem = f"transport: {_http_problem(status, raw)}"
+            problem = f"transport: {http_problem(status, raw)}"
             if 400 <= status < 500 and status not in (408, 409, 429):
                 raise LLMError(f"route {rid}, family {family}: LLM endpoint {url} answered "
                                f"{problem.removeprefix('transport: ')} (check endpoint, model and API key)",
@@ -528,7 +408,7 @@ def llm_variants(baseline: InstructionSet, family: str, k: int, seed: int, cfg: 
             problem = err.summary
             body = _with_problem(first, problem)
             continue
-        _cache_store(path, key, first, content, attempt + 1)
+        _cache_store(cfg.cache_dir, key, first, content, attempt + 1)
         return _variant_sets(baseline, family, seed, cfg, key, texts)
     last = problem.removeprefix("transport: ")
     raise LLMError(f"route {rid}, family {family}: no valid LLM answer from {url} after {attempts} "

@@ -21,7 +21,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 from pathlib import Path
 
@@ -324,7 +324,8 @@ def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
     The agent is reset with the episode's :class:`EpisodeInfo`, then acts on every observation;
     ``callbacks`` (:mod:`icrsumo.sim.callbacks`) attach side effects such as timings or video.
     A privileged agent (``privileged = True``) sees the :class:`World` view, with the route only
-    when it also declares ``needs_route = True``."""
+    when it also declares ``needs_route = True``. An agent with an ``episode_calls()`` method
+    (one that asks a language model) has what it returns stored as the log's ``model_calls``."""
     with Episode(scenario, instructions, options, privileged=bool(getattr(agent, "privileged", False)),
                  needs_route=bool(getattr(agent, "needs_route", False)), callbacks=callbacks) as ep:
         agent.reset(ep.info)
@@ -337,4 +338,6 @@ def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
             for cb in hooks:
                 cb.on_act_end(ep, action)
             obs = ep.step(action)
-    return ep.log(getattr(agent, "name", type(agent).__name__))
+    log = ep.log(getattr(agent, "name", type(agent).__name__))
+    calls = getattr(agent, "episode_calls", None)  # an agent that asks a language model
+    return replace(log, model_calls=tuple(calls())) if callable(calls) else log
