@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .agents.registry import DEFAULT_AGENT, PYTHON_PREFIX
+from .agents.registry import DEFAULT_AGENT
 from .convert import safe_name
 from .errors import InputError
 from .evaluation.options import EvalOptions
@@ -34,6 +34,7 @@ from .evaluation.plan import Job, plan_jobs, prepare_suite
 from .evaluation.progress import Progress
 from .evaluation.run import (
     bind_agents,
+    carries_factory,
     check_agents,
     claim_agents,
     identify_agents,
@@ -230,8 +231,7 @@ def run_attack(opts: AttackOptions) -> dict:
                     batch.append(
                         Job(
                             s.spec, s.agent, s.route, Family.ATTACK.value, q, opts.seed, s.scenario,
-                            str(path), factory=factories[s.spec] if s.spec.startswith(PYTHON_PREFIX)
-                            else None,
+                            str(path), factory=factories[s.spec] if carries_factory(s.spec) else None,
                         )
                     )
                 have = store.keys()

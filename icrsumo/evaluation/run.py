@@ -84,11 +84,15 @@ def bind_agents(factories: Mapping[str, Callable], out: Path) -> dict[str, Calla
             for spec, f in factories.items()}
 
 
+def carries_factory(spec: str) -> bool:
+    """Whether a job of agent ``spec`` must carry its factory: an agent given as a Python object,
+    or one bound to the out folder (an LLM agent); the workers cannot build those from a spec."""
+    return spec.startswith((PYTHON_PREFIX, LLM_PREFIX))
+
+
 def with_factories(jobs: list[Job], factories: Mapping[str, Callable]) -> list[Job]:
-    """``jobs`` whose agent was given as a Python object, or is bound to the out folder (an
-    LLM agent), carry its factory (the workers cannot build it from a spec)."""
-    return [replace(j, factory=factories[j.agent_spec])
-            if j.agent_spec.startswith((PYTHON_PREFIX, LLM_PREFIX)) else j for j in jobs]
+    """``jobs`` with their factory where they must carry it (:func:`carries_factory`)."""
+    return [replace(j, factory=factories[j.agent_spec]) if carries_factory(j.agent_spec) else j for j in jobs]
 
 
 @dataclass(frozen=True)

@@ -125,3 +125,18 @@ def test_check_agent_takes_an_llm_spec(smollm2, capsys):
     assert main(["check-agent", smollm2.spec()]) == 0
     out = capsys.readouterr().out
     assert "loaded" in out and "privileged = True" in out
+
+
+def test_an_attack_replays_from_the_cache_without_a_server(smollm2, tmp_path):
+    from dataclasses import replace
+
+    from icrsumo.attack import AttackOptions, run_attack
+
+    out = tmp_path / "attack"
+    opts = AttackOptions(out=out, agents=(smollm2.spec(),), routes=(ROUTE,), budget=2)
+    run_attack(opts)
+    first = (out / "attack.json").read_bytes()
+    for name in ("attack.json", "results.sqlite", "results.sqlite-wal", "results.sqlite-shm"):
+        (out / name).unlink(missing_ok=True)   # every episode is run again, every answer read from the cache
+    run_attack(replace(opts, agents=(f"llm:smollm2@http://127.0.0.1:{free_port()}/v1",)))
+    assert (out / "attack.json").read_bytes() == first
