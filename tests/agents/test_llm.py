@@ -249,3 +249,19 @@ def test_the_server_check_names_served_models_and_missing_keys(server, monkeypat
     with pytest.raises(InputError, match="does not answer \\(connection refused\\)"):
         check_server(LLMSettings("smollm2", dead), has_cache=False)
     assert check_server(LLMSettings("smollm2", dead), has_cache=True) is True   # answered from the cache
+
+
+def test_with_images_the_bev_raster_goes_along_as_png():
+    import numpy as np
+
+    from icrsumo.agents.base import Observation
+    from icrsumo.agents.llm import LLMFollower
+    from icrsumo.render import CHANNELS
+
+    agent = LLMFollower(parse_spec("llm:vlm@http://127.0.0.1:1/v1?image=1"))
+    bev = np.zeros((len(CHANNELS), 16, 16), np.uint8)
+    bev[0, 4:12, 4:12] = 1
+    png = agent._png(Observation(t=0.0, bev=bev, speed=0.0, instruction="", instruction_id=-1, notice=""))
+    assert png.startswith(b"\x89PNG\r\n\x1a\n") and png == agent._png(
+        Observation(t=1.0, bev=bev.copy(), speed=1.0, instruction="x", instruction_id=0, notice=""))
+    assert agent.name == "llm:vlm+image"
