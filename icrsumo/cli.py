@@ -293,7 +293,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
     cfg = read_config(Path(args.config), augment_instructions=True if args.augment_instructions else None,
                       steps=args.steps, device=args.device, seed=args.seed)
-    m = train(cfg, [Path(d) for d in args.data], Path(args.out))
+    m = train(cfg, [Path(d) for d in args.data], Path(args.out), encode_workers=args.workers)
     print(f"step {m.get('step')}: validation {m.get('val', {})} -> {Path(args.out) / 'model.pt'}")
     return 0
 
@@ -613,6 +613,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--steps", type=int, help="override the config's steps")
     t.add_argument("--seed", type=int, help="override the config's seed")
     t.add_argument("--device", help="auto (default), cpu or cuda")
+    t.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="processes computing a pretrained encoder's embeddings of the training texts "
+                   "(encoder minilm; default: number of cores)")
     t.set_defaults(func=_cmd_train)
     for command in sub.choices.values():  # --debug also after the subcommand
         command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,

@@ -10,7 +10,9 @@ the arc lengths of :data:`icrsumo.learn.labels.ARC_M`, ``speed`` ``(B,)`` target
 the instruction's intent (an auxiliary loss that grounds the language vector).
 
 Language encoders: ``token`` (word embeddings + bidirectional GRU, vocabulary of the
-training instructions) and ``ngram`` (hashed character n-gram embeddings, masked mean, MLP).
+training instructions), ``ngram`` (hashed character n-gram embeddings, masked mean, MLP) and
+``minilm`` (the frozen pretrained sentence embedding of all-MiniLM-L6-v2, computed outside the
+network by :mod:`icrsumo.learn.minilm`, through an MLP).
 
 Checkpoints are plain dicts of tensors, strings and numbers, read with
 ``torch.load(..., weights_only=True)``; a file that is missing, empty, truncated, not a torch
@@ -89,6 +91,20 @@ class _NgramEncoder(nn.Module):
         return self.mlp(mean)
 
 
+class _VectorEncoder(nn.Module):
+    """A precomputed sentence embedding ``(B, text_len)`` through a two-layer MLP."""
+
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        self.mlp = nn.Sequential(nn.Linear(cfg.text_len, cfg.lang), nn.ReLU(), nn.Linear(cfg.lang, cfg.lang))
+
+    def forward(self, vec: torch.Tensor) -> torch.Tensor:
+        return self.mlp(vec)
+
+
+_LANG = {"token": _TokenEncoder, "ngram": _NgramEncoder, "minilm": _VectorEncoder}
+
+
 class BevLanguageNet(nn.Module):
     """BEV CNN + language encoder + FiLM fusion + waypoint / speed / stop / intent heads."""
 
@@ -96,7 +112,7 @@ class BevLanguageNet(nn.Module):
         super().__init__()
         w = cfg.width
         self.cfg = cfg
-        self.lang = _TokenEncoder(cfg) if cfg.encoder == "token" else _NgramEncoder(cfg)
+        self.lang = _LANG[cfg.encoder](cfg)
         self.stem = nn.Conv2d(7, w, 4, stride=4)                       # 128 -> 32
         self.c2 = nn.Conv2d(w, 2 * w, 3, stride=2, padding=1)          # 32 -> 16
         self.c3 = nn.Conv2d(2 * w, 4 * w, 3, stride=2, padding=1)      # 16 -> 8

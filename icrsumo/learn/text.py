@@ -1,4 +1,4 @@
-"""Text -> integer ids for the two language encoders (pure Python, no torch).
+"""Text -> the language encoders' inputs (no torch).
 
 * ``token``: lower-cased word tokens (numbers -> ``<num>``) looked up in a vocabulary built
   from the training instructions (baseline phrasings); unseen words -> ``<unk>``.
@@ -6,7 +6,11 @@
   boundary marks plus the word itself, hashed (CRC-32) into ``buckets`` ids; no vocabulary, so a
   misspelt or unseen word still shares most of its n-grams with the words it resembles.
 
-Both give a fixed-length ``(L,)`` int64 array, 0-padded (0 is padding in both schemes).
+* ``minilm``: the (384,) float32 sentence embedding of the pretrained all-MiniLM-L6-v2
+  (:mod:`icrsumo.learn.minilm`), frozen; the network learns only what it makes of it.
+
+``token`` and ``ngram`` give a fixed-length ``(L,)`` int64 array, 0-padded (0 is padding in
+both schemes); ``minilm`` a ``(384,)`` float32 array.
 """
 
 from __future__ import annotations
@@ -21,7 +25,9 @@ import numpy as np
 
 PAD, UNK, NUM = "<pad>", "<unk>", "<num>"
 _TOKEN = re.compile(r"[a-z]+|\d+")
-ENCODERS = ("token", "ngram")
+ENCODERS = ("token", "ngram", "minilm")
+#: encoders whose input is a float vector of ``length`` values rather than ids
+VECTOR_ENCODERS = ("minilm",)
 
 
 def words(text: str) -> list[str]:
@@ -59,7 +65,16 @@ class TextEncoder:
     vocab: tuple[str, ...] = ()
     buckets: int = 0
 
+    @property
+    def dtype(self) -> type:
+        """The dtype of :meth:`encode`'s array."""
+        return np.float32 if self.kind in VECTOR_ENCODERS else np.int64
+
     def encode(self, text: str) -> np.ndarray:
+        if self.kind == "minilm":
+            from .minilm import encoder
+
+            return encoder().embed(text)
         out = np.zeros(self.length, dtype=np.int64)
         if self.kind == "token":
             index = _index(self.vocab)
@@ -72,8 +87,8 @@ class TextEncoder:
         return out
 
     def encode_many(self, texts: list[str]) -> np.ndarray:
-        """``(len(texts), length)`` ids."""
-        return np.stack([self.encode(t) for t in texts]) if texts else np.zeros((0, self.length), np.int64)
+        """``(len(texts), length)`` ids (or vectors)."""
+        return np.stack([self.encode(t) for t in texts]) if texts else np.zeros((0, self.length), self.dtype)
 
     @property
     def num_ids(self) -> int:

@@ -37,10 +37,10 @@ import numpy as np
 from ..errors import InputError, expect
 from ..fsio import dumps_json, read_json_doc, read_text, write_atomic
 from .augment import augment
-from .text import ENCODERS, build_vocab
+from .text import ENCODERS, VECTOR_ENCODERS, build_vocab
 
 TRAIN_FORMAT = "icrsumo-train/1"
-_DEFAULT_TEXT_LEN = {"token": 32, "ngram": 192}
+_DEFAULT_TEXT_LEN = {"token": 32, "ngram": 192, "minilm": 384}
 
 
 #: upper bounds of the integer sizes of a training config (a value past them cannot run here)
@@ -108,6 +108,10 @@ class TrainConfig:
         if not 0 <= self.text_len <= 4096:
             fail("text_len", f"text_len must be 0 to 4096, not {self.text_len}",
                  "give 0 (the encoder's default) or a positive length")
+        size = _DEFAULT_TEXT_LEN.get(self.encoder, 0)
+        if self.encoder in VECTOR_ENCODERS and self.text_len not in (0, size):
+            fail("text_len", f"the {self.encoder} encoder's vector has {size} values, not {self.text_len}",
+                 "leave text_len out (0)")
         if not 0 <= self.seed < 2**63:
             fail("seed", f"seed {self.seed} out of range", "use 0 to 2**63 - 1")
         if not self.lr > 0:
@@ -311,6 +315,24 @@ def text_pool(ds: Dataset, cfg: TrainConfig, rng: np.random.Generator) -> list[l
             for d in ds.docs]
 
 
+def _encode_chunk(args: tuple) -> np.ndarray:
+    enc, texts = args
+    return enc.encode_many(texts)
+
+
+def encode_texts(enc, texts: list[str], workers: int = 1) -> np.ndarray:
+    """``enc.encode_many(texts)``, over ``workers`` processes for the pretrained encoder (whose
+    per-text cost dominates); the same arrays whatever the worker count."""
+    if workers <= 1 or enc.kind not in VECTOR_ENCODERS or len(texts) < 1000:
+        return enc.encode_many(texts)
+    import multiprocessing as mp
+
+    size = -(-len(texts) // (workers * 4))
+    chunks = [(enc, texts[i:i + size]) for i in range(0, len(texts), size)]
+    with mp.get_context("spawn").Pool(workers) as pool:
+        return np.concatenate(pool.map(_encode_chunk, chunks))
+
+
 def _intent_ids(ds: Dataset) -> np.ndarray:
     from .nets import INTENTS
 
@@ -318,8 +340,11 @@ def _intent_ids(ds: Dataset) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- loop
-def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = False) -> dict:
-    """Train (or resume) into ``out``; returns the final validation metrics."""
+def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = False,
+          encode_workers: int = 1) -> dict:
+    """Train (or resume) into ``out``; returns the final validation metrics. ``encode_workers``:
+    processes that compute the pretrained encoder's embeddings of the training texts (the same
+    embeddings whatever their number)."""
     import torch
 
     from . import nets
@@ -357,10 +382,13 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
                             width=cfg.width, hidden=cfg.hidden)
     enc = mcfg.text_encoder()
     n_var = max(len(p) for p in pool)
-    ids = np.zeros((len(pool), n_var, text_len), dtype=np.int64)
+    ids = np.zeros((len(pool), n_var, text_len), dtype=enc.dtype)
     n_texts = np.array([len(p) for p in pool])
+    distinct = list(dict.fromkeys(t for texts in pool for t in texts))  # each text encoded once
+    row = {t: i for i, t in enumerate(distinct)}
+    codes = encode_texts(enc, distinct, encode_workers)
     for i, texts in enumerate(pool):
-        ids[i, : len(texts)] = enc.encode_many(texts)
+        ids[i, : len(texts)] = codes[[row[t] for t in texts]]
     device = nets.pick_device(cfg.device, "device")
     trainer = nets.Trainer(mcfg, cfg.seed, cfg.lr, cfg.weight_decay, cfg.steps, device)
     log_path = out / "train_log.jsonl"

@@ -84,3 +84,40 @@ def test_augmented_training_config(tiny_data):
     pool = text_pool(ds, TrainConfig(augment_instructions=True, variants=8), np.random.default_rng(0))
     assert all(len(p) == 8 for p, d in zip(pool, ds.docs) if d["type"] != "none")
     assert any(len(set(p)) > 3 for p in pool)
+
+
+def test_the_pretrained_encoder_trains_and_drives(tiny_data, tmp_path):
+    """bev-minilm's recipe on CPU: the frozen sentence embeddings of the training texts, an MLP
+    over them, a checkpoint a LearnedAgent drives with (ONNX Runtime for both networks)."""
+    from icrsumo.agents.base import Observation
+    from icrsumo.learn.agent import LearnedAgent
+    from icrsumo.learn.minilm import DIM, encoder
+
+    cfg = tmp_path / "m.toml"
+    cfg.write_text('encoder = "minilm"\naugment_instructions = true\nvariants = 3\nsteps = 4\nbatch = 16\n'
+                   'eval_every = 2\ncheckpoint_every = 2\nval_fraction = 0.3\nwidth = 8\nhidden = 32\n'
+                   'device = "cpu"\n')
+    out = tmp_path / "run"
+    assert main(["train", str(cfg), "--data", str(tiny_data), "--out", str(out), "--workers", "2"]) == 0
+    ck = torch.load(out / "model.pt", weights_only=True)
+    assert ck["config"]["encoder"] == "minilm" and ck["config"]["text_len"] == DIM
+    agent = LearnedAgent(out / "model.pt")
+    bev = np.zeros((7, 128, 128), np.uint8)
+    obs = Observation(t=0.0, bev=bev, speed=3.0, instruction="Turn left at the junction.", instruction_id=0,
+                      notice="")
+    a, b = agent.act(obs), LearnedAgent(out / "model.pt").act(obs)
+    assert np.array_equal(a.waypoints, b.waypoints) and a.target_speed == b.target_speed
+    e = encoder().embed("Turn left at the junction.")
+    assert e.shape == (DIM,) and abs(float(e @ e) - 1.0) < 1e-4
+    near, far = encoder().embed("Take a left at the junction."), encoder().embed("Stop here.")
+    assert float(e @ near) > float(e @ far)
+
+
+def test_a_minilm_config_with_another_text_len_is_refused(tmp_path):
+    from icrsumo.errors import InputError
+    from icrsumo.learn.train import read_config
+
+    cfg = tmp_path / "m.toml"
+    cfg.write_text('encoder = "minilm"\ntext_len = 64\n')
+    with pytest.raises(InputError, match="vector has 384 values, not 64"):
+        read_config(cfg).check()

