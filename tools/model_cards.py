@@ -23,6 +23,9 @@ ENCODERS = {
              "64-d embeddings, bidirectional GRU (2 x 64)",
     "ngram": "hashed character 3- to 5-grams plus whole words (CRC-32 into 8,192 buckets), 64-d "
              "embeddings, masked mean, 2-layer MLP",
+    "minilm": "the pretrained sentence encoder all-MiniLM-L6-v2 (Apache-2.0, "
+              "`icrsumo/learn/encoders/NOTICE`), frozen: its 384-d embedding (int8 ONNX graph shipped in "
+              "the package, tokenized by `tokenizers`, computed once per distinct text) through an MLP",
 }
 
 
@@ -83,7 +86,7 @@ def _data_line(folders: list[str]) -> str:
 
 
 def card(name: str, summary: dict, train_s: float | None, eval_cmd: str,
-         extra: list[tuple[str, dict, str]] = ()) -> str:
+         extra: list[tuple[str, dict, str]] = (), models_at_once: str = "three") -> str:
     """The model card of shipped checkpoint ``name``; ``train_s``: its training wall time (s),
     by default the one its metadata records."""
     ck = torch.load(CHECKPOINTS / f"{name}.pt", weights_only=True)
@@ -123,7 +126,8 @@ def card(name: str, summary: dict, train_s: float | None, eval_cmd: str,
         f"AdamW, one-cycle lr {cfg['lr']}, seed {cfg['seed']}.",
         f"- Command: `bash tools/train_shipped.sh OUT {' '.join(meta['data'])}` (runs `python -m icrsumo "
         f"train icrsumo/learn/checkpoints/{name}.toml {' '.join('--data ' + d for d in meta['data'])} "
-        f"--out OUT/{name}`), on one NVIDIA H100 (the `device` tool), three models at once; {took}.",
+        f"--out OUT/{name}`), on one NVIDIA H100 (the `device` tool), {models_at_once} models at once; "
+        f"{took}.",
         f"- Validation at the end: waypoint L1 {val.get('waypoints', float('nan')):.3f} m, last point "
         f"error {val.get('final_wp_err', float('nan')):.2f} m, target-speed L1 "
         f"{val.get('speed', float('nan')):.2f} m/s, stop accuracy {val.get('stop_acc', float('nan')):.3f}, "
@@ -144,7 +148,12 @@ def main() -> None:
     ap.add_argument("--extra", action="append", default=[], help="LABEL=SUMMARY.json=COMMAND")
     ap.add_argument("--note", action="append", default=[],
                     help="NAME=TEXT: a paragraph under 'Other measurements' in NAME's card")
+    ap.add_argument("--only", action="append", default=[], help="write only these cards (repeatable)")
+    ap.add_argument("--data", action="append", default=[],
+                    help="FOLDER=TEXT: describe a data folder so (instead of the built-in description)")
+    ap.add_argument("--at-once", default="three", help="how many models were trained at once (words)")
     args = ap.parse_args()
+    DATA.update(dict(x.split("=", 1) for x in args.data))
     extra = []
     for item in args.extra:
         label, path, cmd = item.split("=", 2)
@@ -152,7 +161,9 @@ def main() -> None:
     summary = json.loads(args.summary.read_text())
     secs = {k: float(v) for k, v in (s.split("=", 1) for s in args.train_seconds)}
     for p in sorted(CHECKPOINTS.glob("*.pt")):
-        card_text = card(p.stem, summary, secs.get(p.stem), args.eval_command, extra)
+        if args.only and p.stem not in args.only:
+            continue
+        card_text = card(p.stem, summary, secs.get(p.stem), args.eval_command, extra, args.at_once)
         notes = [t for n, t in (x.split("=", 1) for x in args.note) if n == p.stem]
         if notes:
             card_text += "\n" + "\n".join(["## Other measurements", "", *(f"{t}\n" for t in notes)])

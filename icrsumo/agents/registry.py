@@ -156,7 +156,10 @@ register("instruction-follower", "icrsumo.agents.privileged:InstructionFollower"
 for _name, _cls, _doc in (
         ("bev-token", "TokenAgent", "word-token GRU language encoder, trained on baseline phrasings only."),
         ("bev-ngram", "NgramAgent", "hashed character n-gram language encoder, baseline phrasings only."),
-        ("bev-ngram-aug", "NgramAugAgent", "as bev-ngram, trained with --augment-instructions.")):
+        ("bev-ngram-aug", "NgramAugAgent", "as bev-ngram, trained with --augment-instructions."),
+        ("bev-minilm", "MinilmAgent", "pretrained sentence encoder all-MiniLM-L6-v2 (frozen) + MLP, baseline "
+         "phrasings only (needs icrsumo[minilm])."),
+        ("bev-minilm-aug", "MinilmAugAgent", "as bev-minilm, trained with --augment-instructions.")):
     if (CHECKPOINTS_DIR / f"{_name}.pt").is_file():
         register(_name, f"icrsumo.learn.agent:{_cls}", description=f"learned: {_doc}")
 del _name, _cls, _doc

@@ -58,14 +58,18 @@ class EvalResult:
 
 def resolve_agents(specs: tuple) -> dict[str, Callable]:
     """Spec -> agent factory for every spec (imports user code, asks remote agents for their
-    name); InputErrors for bad specs. An agent given as a Python object (a class, a function
-    making agents, an instance: the Python API) is keyed by its label
-    (:func:`icrsumo.agents.registry.python_agent`)."""
+    name, calls an agent class's ``check_ready()`` when it has one); InputErrors for bad specs.
+    An agent given as a Python object (a class, a function making agents, an instance: the
+    Python API) is keyed by its label (:func:`icrsumo.agents.registry.python_agent`)."""
     out: dict[str, Callable] = {}
     seen: dict[int, str] = {}  # id of an object given -> its label (the same object twice runs once)
     for i, spec in enumerate(specs):
         if isinstance(spec, str):
-            out.setdefault(spec, agent_factory(spec))
+            if spec not in out:
+                out[spec] = agent_factory(spec)
+                check = getattr(getattr(out[spec], "agent_class", out[spec]), "check_ready", None)
+                if callable(check):  # what a worker would fail on, said before any episode runs
+                    check()
         elif id(spec) not in seen:
             label, factory = python_agent(spec, f"agents[{i}]")
             base, n = label, 2

@@ -72,6 +72,19 @@ class LearnedAgent:
         self.policy = _policy(self.path, device, runtime)
         self.clock = StopClock()
 
+    @classmethod
+    def check_ready(cls) -> None:
+        """Read the class's checkpoint and load what its language encoder needs (the
+        pretrained sentence encoder and its tokenizer for ``minilm``): the InputErrors a worker
+        would meet, raised before any episode runs (``icrsumo evaluate`` calls it)."""
+        from .nets import read_checkpoint
+
+        _, cfg = read_checkpoint(checkpoint_path(cls.checkpoint))
+        if cfg.encoder == "minilm":
+            from .minilm import encoder
+
+            encoder()
+
     def reset(self, info: EpisodeInfo) -> None:
         self.clock = StopClock()
 
@@ -132,3 +145,18 @@ class NgramAugAgent(LearnedAgent):
 
     name = "bev-ngram-aug"
     checkpoint = str(CHECKPOINTS / "bev-ngram-aug.pt")  # the shipped file, never one in the cwd
+
+
+class MinilmAgent(LearnedAgent):
+    """``bev-minilm``: the frozen pretrained sentence encoder all-MiniLM-L6-v2
+    (:mod:`icrsumo.learn.minilm`) through an MLP, baseline phrasings only."""
+
+    name = "bev-minilm"
+    checkpoint = str(CHECKPOINTS / "bev-minilm.pt")  # the shipped file, never one in the cwd
+
+
+class MinilmAugAgent(LearnedAgent):
+    """``bev-minilm-aug``: as ``bev-minilm``, trained with ``--augment-instructions``."""
+
+    name = "bev-minilm-aug"
+    checkpoint = str(CHECKPOINTS / "bev-minilm-aug.pt")  # the shipped file, never one in the cwd

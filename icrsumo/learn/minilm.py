@@ -29,12 +29,17 @@ EXTRA = "pip install 'icrsumo[minilm]'"
 _REINSTALL = "reinstall icrsumo (the file ships with it), or rebuild it with python tools/export_minilm.py"
 
 
+def tokenizers_missing() -> bool:
+    """Whether the ``tokenizers`` library (the ``icrsumo[minilm]`` extra) is not installed."""
+    return importlib.util.find_spec("tokenizers") is None
+
+
 class SentenceEncoder:
     """all-MiniLM-L6-v2 in ONNX Runtime (``threads`` intra-op threads). InputErrors name the
     missing or damaged file, or the missing ``tokenizers`` library, and the fix."""
 
     def __init__(self, model: Path = MODEL, tokenizer: Path = TOKENIZER, threads: int = 1) -> None:
-        if importlib.util.find_spec("tokenizers") is None:
+        if tokenizers_missing():
             raise InputError("tokenizers", "", "the bev-minilm agent's tokenizer library is not installed",
                              EXTRA)
         import onnxruntime as ort

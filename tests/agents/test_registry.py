@@ -60,7 +60,7 @@ def echo():
 def test_the_built_ins_are_registered():
     assert BUILTIN is REGISTRY
     assert REGISTRY["route-oracle"] is RouteOracle and REGISTRY["instruction-follower"] is InstructionFollower
-    learned = {"bev-token", "bev-ngram", "bev-ngram-aug"}
+    learned = {"bev-token", "bev-ngram", "bev-ngram-aug", "bev-minilm", "bev-minilm-aug"}
     shipped = {n for n in learned if (CHECKPOINTS / f"{n}.pt").is_file()}
     assert set(REGISTRY) == {"route-oracle", "instruction-follower"} | shipped
     assert DEFAULT_AGENT in REGISTRY

@@ -1,0 +1,59 @@
+"""bev-minilm's pretrained sentence encoder: what ships, what it computes, and the one-line
+errors for a missing or damaged file or a missing tokenizer library, before any episode runs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from icrsumo.cli import main
+from icrsumo.errors import InputError
+from icrsumo.learn import minilm
+from icrsumo.learn.minilm import DIM, MODEL, TOKENIZER, SentenceEncoder
+
+
+def test_the_encoder_ships_with_its_notice_and_licence():
+    assert MODEL.is_file() and TOKENIZER.is_file() and MODEL.stat().st_size < 30 * 2**20
+    notice = (MODEL.parent / "NOTICE").read_text()
+    assert "all-MiniLM-L6-v2" in notice and "Apache License" in notice
+    assert "Apache License" in (MODEL.parent / "LICENSE-Apache-2.0").read_text()
+
+
+def test_embeddings_are_normalised_deterministic_and_mean_something():
+    enc = SentenceEncoder()
+    a = enc.embed("Turn left at the next intersection.")
+    assert a.shape == (DIM,) and a.dtype == np.float32 and abs(float(a @ a) - 1) < 1e-4
+    assert np.array_equal(a, SentenceEncoder().embed("Turn left at the next intersection."))
+    assert np.array_equal(enc.embed_many(["x", "Turn left at the next intersection."])[1], a)
+    para = enc.embed("Take a left at the upcoming junction.")
+    other = enc.embed("The weather is lovely today.")
+    assert float(a @ para) > float(a @ other) + 0.2
+    assert enc.embed("word " * 400).shape == (DIM,)   # cut to the model's 128 tokens
+
+
+def test_missing_and_damaged_files_are_one_line_errors(tmp_path):
+    with pytest.raises(InputError, match="the sentence encoder's file is missing.*tools/export_minilm.py"):
+        SentenceEncoder(model=tmp_path / "none.onnx")
+    bad = tmp_path / "bad.onnx"
+    bad.write_bytes(b"not a graph")
+    with pytest.raises(InputError, match="bad.onnx: not a readable ONNX graph"):
+        SentenceEncoder(model=bad)
+    tok = tmp_path / "tokenizer.json"
+    tok.write_text("{")
+    with pytest.raises(InputError, match="tokenizer.json: not a readable tokenizer"):
+        SentenceEncoder(tokenizer=tok)
+
+
+@pytest.mark.sumo
+def test_without_the_tokenizer_library_evaluate_stops_before_any_episode(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(minilm, "tokenizers_missing", lambda: True)
+    minilm.encoder.cache_clear()
+    out = tmp_path / "out"
+    try:
+        assert main(["evaluate", "--agent", "bev-minilm", "--routes", "tiny_003", "--k", "1", "--quiet",
+                     "--out", str(out)]) == 2
+    finally:
+        minilm.encoder.cache_clear()
+    line = capsys.readouterr().err.strip()
+    assert "pip install 'icrsumo[minilm]'" in line and "\n" not in line
+    assert not out.exists()
