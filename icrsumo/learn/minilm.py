@@ -42,8 +42,9 @@ class SentenceEncoder:
         if tokenizers_missing():
             raise InputError("tokenizers", "", "the bev-minilm agent's tokenizer library is not installed",
                              EXTRA)
-        import onnxruntime as ort
         from tokenizers import Tokenizer
+
+        from .runtime import cpu_session
 
         for path in (model, tokenizer):
             if not Path(path).is_file():
@@ -55,11 +56,8 @@ class SentenceEncoder:
                              _REINSTALL) from None
         self.tokenizer.no_padding()
         self.tokenizer.enable_truncation(MAX_TOKENS)
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = threads
-        opts.inter_op_num_threads = 1
         try:
-            self.session = ort.InferenceSession(str(model), opts, providers=["CPUExecutionProvider"])
+            self.session = cpu_session(str(model), threads)
         except Exception as err:  # noqa: BLE001 - ONNX Runtime's errors, in one line
             raise InputError(model, "", f"not a readable ONNX graph ({' '.join(str(err).split())[:100]})",
                              _REINSTALL) from None

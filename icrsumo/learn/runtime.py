@@ -1,5 +1,5 @@
-"""ONNX Runtime inference of a learned agent's network on the CPU; the only module of the
-package that imports onnxruntime.
+"""ONNX Runtime inference of a learned agent's network (and of the pretrained sentence
+encoder) on the CPU; the only module of the package that imports onnxruntime.
 
 At batch size 1 a small network's cost in torch is mostly framework overhead per operator.
 :class:`OrtFuse` runs the same graph (the BEV encoder, the FiLM fusion and the heads: every
@@ -20,6 +20,20 @@ INPUTS = ("bev", "lang", "speed", "stopped")
 OUTPUTS = ("waypoints", "speed_out", "stop_prob")
 
 
+def cpu_session(model: bytes | str, threads: int = 1) -> ort.InferenceSession:
+    """An ONNX Runtime CPU session of ``model`` (graph bytes or a file path) with ``threads``
+    intra-op threads, sequential execution and every graph optimisation (the sentence encoder of
+    :mod:`icrsumo.learn.minilm` uses it too)."""
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = max(int(threads), 1)
+    so.inter_op_num_threads = 1
+    so.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    so.log_severity_level = 3
+    so.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    return ort.InferenceSession(model, so, providers=["CPUExecutionProvider"])
+
+
 class OrtFuse:
     """One ONNX Runtime CPU session of an exported fusion graph (``model``: the ONNX bytes).
 
@@ -28,14 +42,7 @@ class OrtFuse:
     (B,) m/s and ``stop_prob`` (B,)."""
 
     def __init__(self, model: bytes, threads: int = 1) -> None:
-        so = ort.SessionOptions()
-        so.intra_op_num_threads = max(int(threads), 1)
-        so.inter_op_num_threads = 1
-        so.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-        so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-        so.log_severity_level = 3
-        so.add_session_config_entry("session.intra_op.allow_spinning", "0")
-        self.session = ort.InferenceSession(model, so, providers=["CPUExecutionProvider"])
+        self.session = cpu_session(model, threads)
         names = tuple(i.name for i in self.session.get_inputs())
         if names != INPUTS:
             raise ValueError(f"ONNX graph inputs {names}, expected {INPUTS}")
