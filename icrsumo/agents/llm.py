@@ -572,7 +572,7 @@ def check_server(s: LLMSettings, has_cache: bool) -> bool:
     InputErrors naming the fix. Returns True (offline) when the server is unreachable but
     ``has_cache`` (the run is answered from the cache)."""
     key = api_key(s)
-    start = "start it (e.g. python -m llama_cpp.server --model FILE.gguf --port 8080), or fix the URL"
+    start = "start it (e.g. icrsumo serve-llm --port 8080 for SmolLM2), or fix the URL"
     try:
         models = served_models(s.endpoint, api_key=key, timeout=min(s.timeout, 10.0))
     except Transport as err:
