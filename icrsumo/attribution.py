@@ -122,8 +122,8 @@ def attach(summary: dict, records: Sequence[EpisodeRecord],
     "templates": [...]}."""
     for agent, a in summary["agents"].items():
         for fam, block in [(Family.BASELINE, a["baseline"]), *a["families"].items()]:
-            eps = [decisions[_key(r)] for r in records
-                   if r.agent == agent and r.family == fam and _key(r) in decisions]
+            mine = [r for r in records if r.agent == agent and r.family == fam]
+            eps = [decisions[_key(r)] for r in mine if _key(r) in decisions]
             stats = block_stats(eps)
             block["decisions"] = stats["decisions"]
             block["adherence"] = stats["adherence"]
@@ -131,7 +131,6 @@ def attach(summary: dict, records: Sequence[EpisodeRecord],
             if fam != Family.BASELINE:
                 block["compliance"] = stats["compliance"]
             if "invalid_rate" in block and answers is not None:
-                mine = [r for r in records if r.agent == agent and r.family == fam]
                 block["answers"] = answer_confusion(answers[_key(r)] for r in mine if _key(r) in answers)
     rows = flips(records, decisions)
     return {"flips": rows, "templates": template_ranking(rows, decisions)}

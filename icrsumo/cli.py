@@ -157,11 +157,10 @@ def _agents(args: argparse.Namespace) -> tuple[str, ...]:
         option = "--llm-key-env" if args.llm_key_env else "--llm-image"
         raise InputError(option, "", "applies to llm:MODEL@URL agents only, and none is given",
                          f"add --agent llm:MODEL@http://HOST:PORT/v1, or leave {option} out")
-    if args.llm_key_env:
-        from .agents.llm import parse_spec
+    from .agents.llm import check_key_env, with_options
 
-        parse_spec(f"llm:m@http://h?key_env={args.llm_key_env}")  # the variable name is checked
-    from .agents.llm import with_options
+    if args.llm_key_env:
+        check_key_env(args.llm_key_env, "--llm-key-env", args.llm_key_env)
 
     return tuple(with_options(s, args.llm_key_env, args.llm_image) for s in specs)
 

@@ -130,14 +130,10 @@ def tables(summary: dict) -> dict[str, str]:
     RD/TO in % of the family's episodes; CSV has the unrounded summary numbers."""
     rows = _rows(summary)
     answers = has_answers(summary)
-
-    def extra(b: dict, none: str) -> list[str]:
-        return [_answer_cell(b, none)] if answers else []
-
-    header = (*_HEADER, _ANSWERS_HEADER) if answers else _HEADER
+    header, text_rows = table_cells(summary)
     md = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * 2 + ["---:"] * (len(header) - 2)) + "|"]
-    for agent, fam, b in rows:
-        md.append("| " + " | ".join([agent, fam] + _cells(fam, b, "—") + extra(b, "—")) + " |")
+    for agent, fam, cells in text_rows:
+        md.append("| " + " | ".join([agent, fam, *cells]) + " |")
     note = crash_note(summary)
     if note:
         md += ["", note]
@@ -164,11 +160,11 @@ def tables(summary: dict) -> dict[str, str]:
     tex = [r"\begin{tabular}{ll" + "r" * (len(tex_head) - 2) + "}", r"\toprule",
            " & ".join(tex_head) + r" \\", r"\midrule"]
     prev = None
-    for agent, fam, b in rows:
+    for agent, fam, text in text_rows:
         if prev is not None and agent != prev:
             tex.append(r"\midrule")
         cells = [_tex_escape(agent) if agent != prev else "", _tex_escape(fam)]
-        cells += [_tex_num(c) for c in _cells(fam, b, "—") + extra(b, "—")]
+        cells += [_tex_num(c) for c in text]
         tex.append(" & ".join(cells) + r" \\")
         prev = agent
     tex += [r"\bottomrule", r"\end{tabular}"]

@@ -141,7 +141,7 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
     overrides: for folders written before icrsumo recorded specs)."""
     from .agents.identity import fingerprint, short
     from .agents.registry import PYTHON_PREFIX, agent_factory
-    from .evaluation.run import read_config
+    from .evaluation.run import bind_agents, read_config
     from .instructions.store import read_instruction_sets
     from .logs import dumps_log, loads_log
     from .render import write_image
@@ -170,8 +170,7 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
                          "pass --spec module:Class (or path/file.py:Class)")
     factory = agent_factory(spec)
     fp = fingerprint(factory)
-    if callable(getattr(type(factory), "bind", None)):  # an LLM agent: answered from OUT/llm-cache
-        factory = factory.bind(out)
+    factory = bind_agents({spec: factory}, out)[spec]  # an LLM agent: answered from OUT/llm-cache
     if stored_fp and fp != stored_fp:
         raise InputError("--agent", agent, f"the agent {spec} is now another agent (fingerprint {short(fp)}, "
                          f"stored {short(stored_fp)}): the replay would not be the stored "

@@ -164,10 +164,7 @@ def parse_spec(spec: str) -> LLMSettings:
     one = {k: v[-1] for k, v in query.items()}
     s = LLMSettings(model=model, endpoint=endpoint)
     if "key_env" in one:
-        if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", one["key_env"]):
-            raise InputError("--agent", spec, f"key_env={one['key_env']!r} is not a variable name",
-                             "name the variable that holds the key, e.g. key_env=OPENAI_API_KEY")
-        s = replace(s, key_env=one["key_env"])
+        s = replace(s, key_env=check_key_env(one["key_env"], "--agent", spec))
     if "image" in one:
         if one["image"] not in ("0", "1", "true", "false"):
             raise InputError("--agent", spec, f"image={one['image']!r}", "use image=1 or image=0")
@@ -189,6 +186,15 @@ def parse_spec(spec: str) -> LLMSettings:
             raise InputError("--agent", spec, f"seed={one['seed']!r}", "use a non-negative integer")
         s = replace(s, seed=int(one["seed"]))
     return s
+
+
+def check_key_env(name: str, option: str, value: str) -> str:
+    """``name`` when it is an environment variable's name; an InputError naming ``option``
+    (and its ``value``) otherwise."""
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+        raise InputError(option, value, f"key_env={name!r} is not a variable name",
+                         "name the variable that holds the key, e.g. key_env=OPENAI_API_KEY")
+    return name
 
 
 def with_options(spec: str, key_env: str | None = None, image: bool = False) -> str:
@@ -327,10 +333,9 @@ class Asker:
     settings: LLMSettings
     key: str | None = None
     memory: dict[str, dict] = field(default_factory=dict)
-    #: requests sent to the server / answered from the cache, and seconds spent on the server
+    #: requests sent to the server / answered from the cache (memory or disk)
     sent: int = 0
     hits: int = 0
-    server_s: float = 0.0
 
     def __post_init__(self) -> None:
         self.cache = ResponseCache(self.settings.cache_dir) if self.settings.cache_dir is not None else None
@@ -357,7 +362,6 @@ class Asker:
         for attempt in range(1 + RETRIES):
             if attempt:
                 time.sleep(RETRY_BACKOFF * attempt)
-            t0 = time.perf_counter()
             try:
                 status, raw = exchange(url, canonical(body), api_key=self.key, timeout=s.timeout,
                                        limit=MAX_ANSWER_BYTES)
@@ -366,8 +370,6 @@ class Asker:
             except Transport as err:
                 problem = f"timed out after {s.timeout:g} s" if str(err) == "timed out" else str(err)
                 continue
-            finally:
-                self.server_s += time.perf_counter() - t0
             self.sent += 1
             if status == 200:
                 try:
@@ -394,8 +396,6 @@ class LLMFollower(InstructionFollower):
         self.asker = Asker(settings, api_key(settings))
         self.calls: list[ModelCall] = []
         self._asked: set[tuple[int, str]] = set()
-        self._obs: Observation | None = None
-        self._renderer = None
         self._stop_since: float | None = None   # s: when the car came to a standstill after "stop"
         self._stopping = False
 
@@ -412,7 +412,6 @@ class LLMFollower(InstructionFollower):
 
     # ---- protocol
     def act(self, obs: Observation) -> Action:
-        self._obs = obs
         action = super().act(obs)
         if self._stopping:
             if obs.speed < STANDING:
@@ -534,9 +533,6 @@ class LLMFactory:
         self.name = settings.name
         self._checked = settings.cache_dir is not None
 
-    def __reduce__(self):  # picklable for process pools and Ray (settings only)
-        return (_rebuild, (self.settings, self._checked))
-
     @property
     def fingerprint(self) -> str:
         from .identity import fingerprint, of_text
@@ -559,12 +555,6 @@ class LLMFactory:
             check_server(self.settings, has_cache=False)
             self._checked = True
         return LLMFollower(self.settings)
-
-
-def _rebuild(settings: LLMSettings, checked: bool) -> LLMFactory:
-    f = LLMFactory(settings)
-    f._checked = checked
-    return f
 
 
 def check_server(s: LLMSettings, has_cache: bool) -> bool:

@@ -17,14 +17,12 @@ from __future__ import annotations
 import json
 import re
 import time
-import urllib.parse
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from ..llmio import (
-    CACHE_FORMAT,
     Invalid,
     ResponseCache,
     Transport,
@@ -33,6 +31,7 @@ from ..llmio import (
     chat_url,
     exchange,
     http_problem,
+    is_http,
     request_hash,
 )
 from ..types import Instruction, InstructionSet, Intent
@@ -41,9 +40,8 @@ from .families import FAMILIES
 
 PLACEHOLDER = "[x]"
 MAX_TEXT = 300                  # a variant text must be shorter than this (characters)
-MAX_RESPONSE_BYTES = 8 << 20    # larger HTTP bodies are rejected (bytes)
 RETRY_BACKOFF = 0.5             # s slept before retrying after a transport failure (times attempt)
-__all__ = ["CACHE_FORMAT", "LLMConfig", "LLMError", "canonical", "llm_variants", "request_hash"]
+__all__ = ["LLMConfig", "LLMError", "canonical", "llm_variants", "request_hash"]
 
 _UNCHECKED = (Intent.STOP, Intent.UNKNOWN)   # baseline intents without an intent check
 
@@ -159,26 +157,6 @@ def _with_problem(first: dict, problem: str) -> dict:
         "Answer again with a corrected JSON object that follows every rule."
     )
     return body
-
-
-# ---------------------------------------------------------------------------------------------
-# transport (icrsumo.llmio)
-
-
-class _Transport(Exception):
-    """A failed exchange. ``unreachable``: nothing answered at all."""
-
-    def __init__(self, message: str, unreachable: bool = False) -> None:
-        super().__init__(message)
-        self.unreachable = unreachable
-
-
-def _post(url: str, data: bytes, cfg: LLMConfig) -> tuple[int, bytes]:
-    """POST ``data``; returns (HTTP status, body bytes). Transport failures raise _Transport."""
-    try:
-        return exchange(url, data, api_key=cfg.api_key, timeout=cfg.timeout, limit=MAX_RESPONSE_BYTES)
-    except Transport as err:
-        raise _Transport(str(err), unreachable=err.unreachable) from err
 
 
 # ---------------------------------------------------------------------------------------------
@@ -377,7 +355,7 @@ def llm_variants(baseline: InstructionSet, family: str, k: int, seed: int, cfg: 
             pass   # e.g. the classifier changed since: ask again and overwrite
 
     url = chat_url(cfg.endpoint)
-    if urllib.parse.urlsplit(url).scheme not in ("http", "https"):
+    if not is_http(url):
         raise LLMError(f"route {rid}, family {family}: LLM endpoint {cfg.endpoint!r} is not an "
                        "http:// or https:// URL", rid, family, "bad endpoint")
     attempts = 1 + max(0, int(cfg.retries))
@@ -387,8 +365,8 @@ def llm_variants(baseline: InstructionSet, family: str, k: int, seed: int, cfg: 
         if attempt and RETRY_BACKOFF > 0 and problem.startswith("transport:"):
             time.sleep(min(RETRY_BACKOFF * attempt, 5.0))
         try:
-            status, raw = _post(url, canonical(body), cfg)
-        except _Transport as err:
+            status, raw = exchange(url, canonical(body), api_key=cfg.api_key, timeout=cfg.timeout)
+        except Transport as err:
             if attempt == 0 and err.unreachable:
                 raise LLMError(f"route {rid}, family {family}: LLM endpoint {cfg.endpoint} unreachable "
                                f"({err})", rid, family, str(err)) from None

@@ -72,19 +72,6 @@ class LearnedAgent:
         self.policy = _policy(self.path, device, runtime)
         self.clock = StopClock()
 
-    @classmethod
-    def check_ready(cls) -> None:
-        """Read the class's checkpoint and load what its language encoder needs (the
-        pretrained sentence encoder and its tokenizer for ``minilm``): the InputErrors a worker
-        would meet, raised before any episode runs (``icrsumo evaluate`` calls it)."""
-        from .nets import read_checkpoint
-
-        _, cfg = read_checkpoint(checkpoint_path(cls.checkpoint))
-        if cfg.encoder == "minilm":
-            from .minilm import encoder
-
-            encoder()
-
     def reset(self, info: EpisodeInfo) -> None:
         self.clock = StopClock()
 
@@ -154,8 +141,20 @@ class MinilmAgent(LearnedAgent):
     name = "bev-minilm"
     checkpoint = str(CHECKPOINTS / "bev-minilm.pt")  # the shipped file, never one in the cwd
 
+    @classmethod
+    def check_ready(cls) -> None:
+        """Read the checkpoint and load the sentence encoder and its tokenizer: the InputErrors
+        a worker would meet (a missing ``tokenizers`` library, a missing or damaged file),
+        raised before any episode runs (``icrsumo evaluate`` calls it). Only the agents that
+        need the encoder have it, so the other learned agents add nothing to start-up."""
+        from .minilm import encoder
+        from .nets import read_checkpoint
 
-class MinilmAugAgent(LearnedAgent):
+        read_checkpoint(checkpoint_path(cls.checkpoint))
+        encoder()
+
+
+class MinilmAugAgent(MinilmAgent):
     """``bev-minilm-aug``: as ``bev-minilm``, trained with ``--augment-instructions``."""
 
     name = "bev-minilm-aug"
