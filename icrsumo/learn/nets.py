@@ -22,6 +22,7 @@ file, refused by that safe loader, or whose weights do not fit its model config 
 
 from __future__ import annotations
 
+import math
 import pickle
 import re
 from dataclasses import asdict, dataclass, field, fields
@@ -91,6 +92,72 @@ class _NgramEncoder(nn.Module):
         return self.mlp(mean)
 
 
+#: all-MiniLM-L6-v2's layer shape: width, attention heads, feed-forward width, LayerNorm epsilon
+MINILM_SHAPE = (384, 12, 1536, 1e-12)
+#: a BERT layer's parts here and in Hugging Face's state dicts
+BERT_PARTS = {"q": "attention.self.query", "k": "attention.self.key", "v": "attention.self.value",
+              "o": "attention.output.dense", "ln1": "attention.output.LayerNorm",
+              "ffn_in": "intermediate.dense", "ffn_out": "output.dense", "ln2": "output.LayerNorm"}
+
+
+class BertLayer(nn.Module):
+    """One post-LayerNorm BERT encoder layer (exact GELU), as all-MiniLM-L6-v2 has six:
+    ``x`` (B, L, width) and ``bias`` (B, 1, 1, L) additive attention mask (0 for tokens, -1e4 for
+    padding) -> (B, L, width). Linear weights are held (in, out) and applied as ``x @ w + b``,
+    so that an ONNX export keeps their names (``q_w``, ``q_b``, ... ``ln2_w``, ``ln2_b``)."""
+
+    def __init__(self, width: int = 384, heads: int = 12, ffn: int = 1536, eps: float = 1e-12) -> None:
+        super().__init__()
+        self.width, self.heads, self.eps = width, heads, eps
+        shapes = {"q": (width, width), "k": (width, width), "v": (width, width), "o": (width, width),
+                  "ffn_in": (width, ffn), "ffn_out": (ffn, width)}
+        for name, (n_in, n_out) in shapes.items():
+            setattr(self, f"{name}_w", nn.Parameter(torch.randn(n_in, n_out) * 0.02))
+            setattr(self, f"{name}_b", nn.Parameter(torch.zeros(n_out)))
+        for name in ("ln1", "ln2"):
+            setattr(self, f"{name}_w", nn.Parameter(torch.ones(width)))
+            setattr(self, f"{name}_b", nn.Parameter(torch.zeros(width)))
+
+    def _ln(self, x: torch.Tensor, name: str) -> torch.Tensor:
+        w, b = getattr(self, f"{name}_w"), getattr(self, f"{name}_b")
+        return F.layer_norm(x, (self.width,), w, b, self.eps)
+
+    def _lin(self, x: torch.Tensor, name: str) -> torch.Tensor:
+        return x @ getattr(self, f"{name}_w") + getattr(self, f"{name}_b")
+
+    def forward(self, x: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
+        d = self.width // self.heads
+
+        def split(t: torch.Tensor) -> torch.Tensor:
+            return t.view(t.shape[0], t.shape[1], self.heads, d).transpose(1, 2)
+
+        q, k, v = (split(self._lin(x, n)) for n in ("q", "k", "v"))
+        att = torch.softmax(q @ k.transpose(-1, -2) / math.sqrt(d) + bias, dim=-1)
+        ctx = (att @ v).transpose(1, 2).reshape(x.shape)
+        x = self._ln(x + self._lin(ctx, "o"), "ln1")
+        h = F.gelu(self._lin(x, "ffn_in"))
+        return self._ln(x + self._lin(h, "ffn_out"), "ln2")
+
+
+def bert_layer_state(weights: dict[str, np.ndarray], prefix: str) -> dict[str, torch.Tensor]:
+    """:class:`BertLayer`'s state dict from a Hugging Face BERT state dict's layer ``prefix``
+    (``encoder.layer.5``); linear weights transposed to (in, out)."""
+    out = {}
+    for name, hf in BERT_PARTS.items():
+        w = np.asarray(weights[f"{prefix}.{hf}.weight"], dtype=np.float32)
+        out[f"{name}_w"] = torch.from_numpy(np.ascontiguousarray(w if name.startswith("ln") else w.T))
+        out[f"{name}_b"] = torch.from_numpy(np.asarray(weights[f"{prefix}.{hf}.bias"], dtype=np.float32))
+    return out
+
+
+def sentence_embedding(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """sentence-transformers' pooling: the mean of token states ``x`` (B, L, D) over ``mask``
+    (B, L), L2-normalised -> (B, D)."""
+    m = mask[:, :, None].to(x.dtype)
+    pooled = (x * m).sum(1) / m.sum(1).clamp(min=1e-9)
+    return F.normalize(pooled, p=2.0, dim=1)
+
+
 class _VectorEncoder(nn.Module):
     """A precomputed sentence embedding ``(B, text_len)`` through a two-layer MLP."""
 
@@ -102,7 +169,27 @@ class _VectorEncoder(nn.Module):
         return self.mlp(vec)
 
 
-_LANG = {"token": _TokenEncoder, "ngram": _NgramEncoder, "minilm": _VectorEncoder}
+class _TunedEncoder(nn.Module):
+    """all-MiniLM-L6-v2's last layer, trained, over the frozen token states of its first five
+    (``(B, text_len)``: T x 384 values per text, zero rows past its tokens, computed outside
+    the network by :mod:`icrsumo.learn.minilm`), pooled as the frozen encoder pools, then the
+    MLP of the ``minilm`` encoder. :func:`build_model` starts the layer at the pretrained one."""
+
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        width, heads, ffn, eps = MINILM_SHAPE
+        self.layer = BertLayer(width, heads, ffn, eps)
+        self.mlp = nn.Sequential(nn.Linear(width, cfg.lang), nn.ReLU(), nn.Linear(cfg.lang, cfg.lang))
+
+    def forward(self, states: torch.Tensor) -> torch.Tensor:
+        x = states.view(states.shape[0], -1, self.layer.width)
+        mask = (x != 0).any(-1)
+        bias = (~mask)[:, None, None, :].to(x.dtype) * -1e4
+        return self.mlp(sentence_embedding(self.layer(x, bias), mask))
+
+
+_LANG = {"token": _TokenEncoder, "ngram": _NgramEncoder, "minilm": _VectorEncoder,
+         "minilm-tuned": _TunedEncoder}
 
 
 class BevLanguageNet(nn.Module):
@@ -160,7 +247,12 @@ def build_model(cfg: ModelConfig, seed: int) -> BevLanguageNet:
     RNG is forked and restored, so the caller's random state is left alone)."""
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
-        return BevLanguageNet(cfg)
+        net = BevLanguageNet(cfg)
+    if cfg.encoder == "minilm-tuned":  # the layer to tune starts as the pretrained one
+        from .minilm import encoder
+
+        net.lang.layer.load_state_dict({k: torch.from_numpy(v) for k, v in encoder().last_layer().items()})
+    return net
 
 
 def losses(out: dict[str, torch.Tensor], batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
@@ -194,12 +286,18 @@ class Trainer:
     """Model + AdamW + step counter on ``device``; saves and resumes its whole state."""
 
     def __init__(self, cfg: ModelConfig, seed: int, lr: float, weight_decay: float, steps: int,
-                 device: torch.device) -> None:
+                 device: torch.device, lr_tuned: float = 1e-4) -> None:
         self.cfg, self.device, self.steps = cfg, device, steps
         self.model = build_model(cfg, seed).to(device)
-        self.opt = torch.optim.AdamW(self.model.parameters(), lr=lr, weight_decay=weight_decay)
-        self.sched = torch.optim.lr_scheduler.OneCycleLR(self.opt, max_lr=lr, total_steps=max(steps, 2),
-                                                         pct_start=0.05)
+        # a pretrained layer being fine-tuned (minilm-tuned) gets its own, lower peak lr
+        named = list(self.model.named_parameters())
+        groups = [{"params": [p for n, p in named if not n.startswith("lang.layer.")], "lr": lr}]
+        tuned = [p for n, p in named if n.startswith("lang.layer.")]
+        if tuned:
+            groups.append({"params": tuned, "lr": lr_tuned})
+        self.opt = torch.optim.AdamW(groups, lr=lr, weight_decay=weight_decay)
+        self.sched = torch.optim.lr_scheduler.OneCycleLR(self.opt, max_lr=[g["lr"] for g in groups],
+                                                         total_steps=max(steps, 2), pct_start=0.05)
         self.step = 0
 
     def to_device(self, batch: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
@@ -323,6 +421,9 @@ def config_from_dict(d: object, path: Path | str = "checkpoint", place: str = "c
             raise InputError(path, f"{place}.{key}", f"{getattr(cfg, key)} is not a positive size", fix)
     if cfg.lang < 2 or cfg.lang % 2:
         raise InputError(path, f"{place}.lang", f"{cfg.lang} is not a positive even size", fix)
+    if cfg.encoder == "minilm-tuned" and cfg.text_len % MINILM_SHAPE[0]:
+        raise InputError(path, f"{place}.text_len", f"{cfg.text_len} is not a whole number of "
+                         f"{MINILM_SHAPE[0]}-value token states", fix)
     if cfg.encoder == "ngram" and cfg.buckets < 2:
         raise InputError(path, f"{place}.buckets", f"{cfg.buckets} hash buckets (at least 2)", fix)
     if cfg.encoder == "token" and len(cfg.vocab) < 2:

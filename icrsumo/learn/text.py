@@ -8,9 +8,12 @@
 
 * ``minilm``: the (384,) float32 sentence embedding of the pretrained all-MiniLM-L6-v2
   (:mod:`icrsumo.learn.minilm`), frozen; the network learns only what it makes of it.
+* ``minilm-tuned``: the token states entering all-MiniLM-L6-v2's last layer, (T, 384) float32
+  flattened (T = ``length`` / 384 tokens: longer texts cut, shorter ones zero-padded); the
+  network holds its own copy of that layer and fine-tunes it.
 
 ``token`` and ``ngram`` give a fixed-length ``(L,)`` int64 array, 0-padded (0 is padding in
-both schemes); ``minilm`` a ``(384,)`` float32 array.
+both schemes); ``minilm`` a ``(384,)`` and ``minilm-tuned`` a ``(length,)`` float32 array.
 """
 
 from __future__ import annotations
@@ -25,9 +28,11 @@ import numpy as np
 
 PAD, UNK, NUM = "<pad>", "<unk>", "<num>"
 _TOKEN = re.compile(r"[a-z]+|\d+")
-ENCODERS = ("token", "ngram", "minilm")
+ENCODERS = ("token", "ngram", "minilm", "minilm-tuned")
 #: encoders whose input is a float vector of ``length`` values rather than ids
-VECTOR_ENCODERS = ("minilm",)
+VECTOR_ENCODERS = ("minilm", "minilm-tuned")
+#: values per token of ``minilm-tuned``'s states
+STATE_WIDTH = 384
 
 
 def words(text: str) -> list[str]:
@@ -75,6 +80,13 @@ class TextEncoder:
             from .minilm import encoder
 
             return encoder().embed(text)
+        if self.kind == "minilm-tuned":
+            from .minilm import encoder
+
+            states = encoder().states(text)[: self.length // STATE_WIDTH]
+            vec = np.zeros(self.length, dtype=np.float32)
+            vec[: states.size] = states.reshape(-1)
+            return vec
         out = np.zeros(self.length, dtype=np.int64)
         if self.kind == "token":
             index = _index(self.vocab)

@@ -40,7 +40,7 @@ from .augment import augment
 from .text import ENCODERS, VECTOR_ENCODERS, build_vocab
 
 TRAIN_FORMAT = "icrsumo-train/1"
-_DEFAULT_TEXT_LEN = {"token": 32, "ngram": 192, "minilm": 384}
+_DEFAULT_TEXT_LEN = {"token": 32, "ngram": 192, "minilm": 384, "minilm-tuned": 64 * 384}
 
 
 #: upper bounds of the integer sizes of a training config (a value past them cannot run here)
@@ -50,7 +50,8 @@ LIMITS = {"steps": 10**8, "batch": 65_536, "eval_every": 10**8, "checkpoint_ever
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Training options (TOML keys). Sizes in frames; ``lr`` peak of a one-cycle schedule;
+    """Training options (TOML keys). Sizes in frames; ``lr`` peak of a one-cycle schedule
+    (``lr_tuned`` that of the pretrained layer the ``minilm-tuned`` encoder fine-tunes);
     ``val_fraction`` of routes held out; ``variants`` augmented texts drawn per instruction."""
 
     encoder: str = "ngram"
@@ -59,6 +60,7 @@ class TrainConfig:
     steps: int = 20000
     batch: int = 256
     lr: float = 1e-3
+    lr_tuned: float = 1e-4
     weight_decay: float = 1e-4
     eval_every: int = 500
     checkpoint_every: int = 1000
@@ -114,8 +116,10 @@ class TrainConfig:
                  "leave text_len out (0)")
         if not 0 <= self.seed < 2**63:
             fail("seed", f"seed {self.seed} out of range", "use 0 to 2**63 - 1")
-        if not self.lr > 0:
-            fail("lr", f"lr must be positive, not {self.lr}", "give e.g. lr = 0.001")
+        for name, example in (("lr", 0.001), ("lr_tuned", 0.0001)):
+            if not getattr(self, name) > 0:
+                fail(name, f"{name} must be positive, not {getattr(self, name)}",
+                     f"give e.g. {name} = {example}")
         if not self.weight_decay >= 0:
             fail("weight_decay", f"weight_decay must not be negative, not {self.weight_decay}",
                  "give 0 or e.g. 0.0001")
@@ -390,7 +394,7 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
     for i, texts in enumerate(pool):
         ids[i, : len(texts)] = codes[[row[t] for t in texts]]
     device = nets.pick_device(cfg.device, "device")
-    trainer = nets.Trainer(mcfg, cfg.seed, cfg.lr, cfg.weight_decay, cfg.steps, device)
+    trainer = nets.Trainer(mcfg, cfg.seed, cfg.lr, cfg.weight_decay, cfg.steps, device, cfg.lr_tuned)
     log_path = out / "train_log.jsonl"
     kept: list[str] = []
     if state is not None:

@@ -57,3 +57,37 @@ def test_without_the_tokenizer_library_evaluate_stops_before_any_episode(monkeyp
     line = capsys.readouterr().err.strip()
     assert "pip install 'icrsumo[minilm]'" in line and "\n" not in line
     assert not out.exists()
+
+
+def test_token_states_and_the_last_layer_rebuild_the_embedding():
+    """``states`` enter the last layer; that layer, dequantised into torch, maps them to (nearly)
+    the graph's own embedding: where bev-minilm-tuned's fine-tuning starts."""
+    import torch
+
+    from icrsumo.learn.nets import MINILM_SHAPE, BertLayer, sentence_embedding
+
+    enc = SentenceEncoder()
+    text = "After the bike has passed, turn left at the lights."
+    states = enc.states(text)
+    n = len(enc.tokenizer.encode(text).ids)
+    assert states.shape == (n, DIM) and states.dtype == np.float32
+    assert np.array_equal(states, SentenceEncoder().states(text))
+    layer = BertLayer(*MINILM_SHAPE)
+    layer.load_state_dict({k: torch.from_numpy(v) for k, v in enc.last_layer().items()})
+    with torch.no_grad():
+        x = torch.from_numpy(states)[None]
+        out = sentence_embedding(layer(x, torch.zeros(1, 1, 1, n)), torch.ones(1, n))[0].numpy()
+    assert float(out @ enc.embed(text)) > 0.99
+
+
+def test_an_export_without_the_states_output_is_refused(tmp_path):
+    import onnx
+
+    model = onnx.load(str(MODEL))
+    kept = [o for o in model.graph.output if o.name != "states"]
+    del model.graph.output[:]
+    model.graph.output.extend(kept)
+    old = tmp_path / "old.onnx"
+    onnx.save(model, str(old))
+    with pytest.raises(InputError, match="old.onnx: the graph has no output 'states' .*export_minilm"):
+        SentenceEncoder(model=old)

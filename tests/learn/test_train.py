@@ -113,6 +113,44 @@ def test_the_pretrained_encoder_trains_and_drives(tiny_data, tmp_path):
     assert float(e @ near) > float(e @ far)
 
 
+def test_the_tuned_encoder_starts_at_the_pretrained_layer_and_trains_it(tiny_data, tmp_path):
+    """bev-minilm-tuned's recipe on CPU: token states of the training texts, the encoder's last
+    layer copied into the network at the start and trained at its own (lower) learning rate."""
+    from icrsumo.agents.base import Observation
+    from icrsumo.learn import nets
+    from icrsumo.learn.agent import LearnedAgent
+    from icrsumo.learn.minilm import encoder
+
+    mcfg = nets.ModelConfig(encoder="minilm-tuned", text_len=8 * 384, width=8, hidden=32)
+    start = {k: v.numpy() for k, v in nets.build_model(mcfg, 0).lang.layer.state_dict().items()}
+    assert all(np.array_equal(start[k], v) for k, v in encoder().last_layer().items())
+    trainer = nets.Trainer(mcfg, 0, 1e-3, 0.0, 10, torch.device("cpu"), lr_tuned=2e-5)
+    lrs = [g["lr"] for g in trainer.opt.param_groups]   # one schedule, two peaks
+    assert len(lrs) == 2 and lrs[1] / lrs[0] == pytest.approx(2e-5 / 1e-3)
+    cfg = tmp_path / "m.toml"
+    cfg.write_text('encoder = "minilm-tuned"\naugment_instructions = true\nvariants = 2\nsteps = 3\n'
+                   'batch = 8\neval_every = 3\ncheckpoint_every = 3\nval_fraction = 0.3\nwidth = 8\n'
+                   'hidden = 32\ndevice = "cpu"\nlr_tuned = 0.001\n')
+    out = tmp_path / "run"
+    assert main(["train", str(cfg), "--data", str(tiny_data), "--out", str(out)]) == 0
+    ck = torch.load(out / "model.pt", weights_only=True)
+    assert ck["config"]["encoder"] == "minilm-tuned" and ck["config"]["text_len"] == 64 * 384
+    assert not np.array_equal(ck["model"]["lang.layer.q_w"].numpy(), start["q_w"])
+    bev = np.zeros((7, 128, 128), np.uint8)
+    obs = Observation(t=0.0, bev=bev, speed=3.0, instruction="Keep left at the fork.", instruction_id=0,
+                      notice="")
+    a, b = LearnedAgent(out / "model.pt").act(obs), LearnedAgent(out / "model.pt").act(obs)
+    assert np.array_equal(a.waypoints, b.waypoints) and a.target_speed == b.target_speed
+
+
+def test_a_tuned_checkpoint_with_a_partial_token_state_is_refused(tmp_path):
+    from icrsumo.errors import InputError
+    from icrsumo.learn import nets
+
+    with pytest.raises(InputError, match="config.text_len: 400 is not a whole number of 384-value"):
+        nets.config_from_dict({"encoder": "minilm-tuned", "text_len": 400}, tmp_path / "m.pt")
+
+
 def test_a_minilm_config_with_another_text_len_is_refused(tmp_path):
     from icrsumo.errors import InputError
     from icrsumo.learn.train import read_config
