@@ -104,7 +104,9 @@ def evaluate(suite: str | Path = "tiny", agents: str | Sequence[str] | None = No
     ``agent_device``, ``baseline_bank`` (LMDrive's instruction dictionary: LangAuto's own baseline
     wording, part of the folder's configuration), ``scoring`` (``lb1``: CARLA Leaderboard 1.0's
     rules, part of the folder's configuration), ``replace_agents`` (names whose stored episodes
-    another agent of that name drove are deleted and run again), ``retry_crashed``.
+    another agent of that name drove are deleted and run again), ``retry_crashed``, ``guards``
+    (instruction guards, e.g. ``"plan"`` or ``["text", "plan"]``: every agent also runs behind each,
+    as its own rows ``AGENT+guard:NAME``; :mod:`icrsumo.guards`).
 
     Returns an :class:`icrsumo.evaluation.EvalResult`: ``summary`` (OUT/summary.json),
     ``out``, the episode counts and the batched-inference statistics. Raises
@@ -129,6 +131,8 @@ def evaluate_in_cli_words(suite: str | Path = "tiny", agents: Any = None,
         more["routes"] = _names(more["routes"]) or None
     if "replace_agents" in more:
         more["replace_agents"] = _names(more["replace_agents"]) or ()
+    if "guards" in more:
+        more["guards"] = _names(more["guards"]) or ()
     opts = _options(out, suite, agents=_agents(agents), families=_names(families), k=k, seed=seed,
                     workers=workers, quiet=quiet, **more)
     return run_evaluation(opts)

@@ -188,6 +188,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         inference_processes=args.inference_processes, baseline_bank=args.baseline_bank,
         retry_crashed=args.retry_crashed, scoring=args.scoring,
         replace_agents=_split_list(args.replace_agent, "--replace-agent"),
+        guards=_split_list(args.guard, "--guard"),
     )
     again = (" (left out of every table, with their pairs; --retry-crashed runs them again)"
              if result.crashed else "")
@@ -474,6 +475,9 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--replace-agent", action="append", metavar="NAME",
                    help="the out folder holds episodes of another agent of this name (other code or "
                    "checkpoint): delete them and run this one (repeatable)")
+    v.add_argument("--guard", action="append", metavar="NAME",
+                   help="also run every agent behind this instruction guard, as its own rows "
+                   "AGENT+guard:NAME: text, plan, llm:MODEL@URL or a plugin's (repeatable; docs/guards.md)")
     _add_llm_options(v)
     v.set_defaults(func=_cmd_evaluate)
 

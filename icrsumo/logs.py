@@ -31,11 +31,12 @@ from icrsumo.types import (
     EpisodeLog,
     EpisodeResult,
     Event,
+    GuardDecision,
     Infraction,
     ModelCall,
     TerminationClass,
 )
-from icrsumo.vocab import EventKind, Family, Intent, Termination
+from icrsumo.vocab import EventKind, Family, Intent, Termination, Verdict
 
 LOG_VERSION = 2
 
@@ -61,7 +62,10 @@ OPTIONAL_COLUMNS = ("traffic_speed", "speed_limit")
 EVENT_FIELDS: dict[str, int | None] = {"kind": None, "t": 3, "pos": 2, "other": None, "x": 2, "y": 2}
 
 _HEADER = ("version", "route_id", "agent", "family", "k", "seed", "step_length", "route_length",
-           "termination", "termination_t", "message", "route", "steps", "events", "model_calls")
+           "termination", "termination_t", "message", "route", "steps", "events", "model_calls", "guard")
+
+#: the fields of one entry of ``guard`` (an object each), in stored order
+GUARD_FIELDS = ("t", "progress", "instruction_id", "verdict", "reason")
 
 #: the fields of one entry of ``model_calls`` (an object each), in stored order
 CALL_FIELDS = ("t", "instruction_id", "at", "key", "prompt", "answer", "maneuver", "valid", "problem")
@@ -115,6 +119,7 @@ def log_to_dict(log: EpisodeLog) -> dict[str, Any]:
         "events": events,
         **({"model_calls": [_call_to_dict(c, i) for i, c in enumerate(log.model_calls)]}
            if log.model_calls else {}),
+        **({"guard": [_guard_to_dict(g, i) for i, g in enumerate(log.guard)]} if log.guard else {}),
     }
 
 
@@ -122,6 +127,30 @@ def _call_to_dict(c: ModelCall, i: int) -> dict[str, Any]:
     return {"t": _r(c.t, 3, f"model_calls[{i}].t"), "instruction_id": int(c.instruction_id), "at": c.at,
             "key": c.key, "prompt": c.prompt, "answer": c.answer, "maneuver": str(c.maneuver),
             "valid": bool(c.valid), "problem": c.problem}
+
+
+def _guard_to_dict(g: GuardDecision, i: int) -> dict[str, Any]:
+    return {"t": _r(g.t, 3, f"guard[{i}].t"), "progress": _r(g.progress, 2, f"guard[{i}].progress"),
+            "instruction_id": int(g.instruction_id), "verdict": str(g.verdict), "reason": g.reason}
+
+
+def _guard_from(rd: _Reader, raw: Any) -> tuple[GuardDecision, ...]:
+    if not isinstance(raw, list):
+        raise rd.fail("guard", f"expected a list, got {type(raw).__name__}")
+    out = []
+    for i, g in enumerate(raw):
+        at = f"guard[{i}]"
+        if not isinstance(g, dict) or set(g) != set(GUARD_FIELDS):
+            raise rd.fail(at, f"expected an object with keys {', '.join(GUARD_FIELDS)}")
+        try:
+            verdict = Verdict(g["verdict"])
+        except ValueError:
+            raise rd.fail(f"{at}.verdict", f"expected pass or block, got {short(g['verdict'])}") from None
+        out.append(GuardDecision(
+            t=rd.number(g["t"], f"{at}.t"), progress=rd.number(g["progress"], f"{at}.progress"),
+            instruction_id=rd.integer(g["instruction_id"], f"{at}.instruction_id"), verdict=verdict,
+            reason=rd.string(g["reason"], f"{at}.reason")))
+    return tuple(out)
 
 
 def _calls_from(rd: _Reader, raw: Any) -> tuple[ModelCall, ...]:
@@ -293,6 +322,7 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
         traffic_speed=cols["traffic_speed"],
         speed_limit=cols["speed_limit"],
         model_calls=_calls_from(rd, d["model_calls"]) if "model_calls" in d else (),
+        guard=_guard_from(rd, d["guard"]) if "guard" in d else (),
     )
 
 

@@ -97,6 +97,11 @@ _TEX_SPECIAL = {"\\": r"\textbackslash{}", "~": r"\textasciitilde{}", "^": r"\^{
                 **{c: "\\" + c for c in "&%$#_{}"}}
 
 
+def _md_cell(s: str) -> str:
+    """``s`` safe in a Markdown table cell: one line, ``|`` escaped."""
+    return " ".join(str(s).split()).replace("|", "\\|")
+
+
 def _tex_escape(s: str) -> str:
     return "".join(_TEX_SPECIAL.get(c, c) for c in s)
 
@@ -732,6 +737,38 @@ LEADERBOARD_FILES = {"lb1": leaderboard_checkpoint, "lb2": leaderboard_checkpoin
 def _file_name(s: str) -> str:
     name = re.sub(r"[^A-Za-z0-9_.-]", "_", s)
     return name if name not in ("", ".", "..") else f"x_{name}"
+
+
+def guard_tradeoff(doc: dict, path: Path) -> None:
+    """Detection (misleading instructions blocked, %) against false blocks (baseline, paraphrase
+    and noise instructions blocked, %), one point per guard (pooled over its rows), labelled."""
+    fig = _figure(4.6, 3.8)
+    ax = fig.add_subplot()
+    for i, (name, g) in enumerate(sorted(doc["guards"].items())):
+        if g["detection"] is None or g["false_blocks"] is None:
+            continue
+        x, y = 100 * g["false_blocks"], 100 * g["detection"]
+        ax.scatter([x], [y], s=40, color=f"C{i % 10}", zorder=3)
+        ax.annotate(name, (x, y), textcoords="offset points", xytext=(6, 4), fontsize=8)
+    ax.set_xlim(-2, 102)
+    ax.set_ylim(-2, 102)
+    ax.set_xlabel("false blocks: baseline, paraphrase, noise (%)")
+    ax.set_ylabel("detection: misleading blocked (%)")
+    ax.set_title("Instruction guards: what they catch, what they wrongly block", fontsize=9)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def write_guard(doc: dict, out_dir: Path) -> None:
+    """Write guard.json, guard.md and figures/guard_tradeoff.png of a guard document
+    (:func:`icrsumo.guards.measure.guard_doc`)."""
+    from .guards.measure import guard_markdown
+
+    out = Path(out_dir)
+    write_atomic(out / "guard.json", dumps_json(doc))
+    write_atomic(out / "guard.md", guard_markdown(doc, _md_cell))
+    guard_tradeoff(doc, out / "figures" / "guard_tradeoff.png")
 
 
 def write_attribution(summary: dict, doc: dict, out_dir: Path) -> None:

@@ -139,7 +139,7 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
     (default ``dest``: ``OUT/show/AGENT_ROUTE_FAMILY_K``). ``agent`` is the stored name; the
     agent is rebuilt from the spec the folder's configuration records for it (``spec``
     overrides: for folders written before icrsumo recorded specs)."""
-    from .agents.identity import fingerprint, short
+    from .agents.identity import fingerprint, of_text, short
     from .agents.registry import PYTHON_PREFIX, agent_factory
     from .evaluation.run import bind_agents, read_config
     from .instructions.store import read_instruction_sets
@@ -171,6 +171,10 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
     factory = agent_factory(spec)
     fp = fingerprint(factory)
     factory = bind_agents({spec: factory}, out)[spec]  # an LLM agent: answered from OUT/llm-cache
+    guard = entry.get("guard") if isinstance(entry, dict) else None
+    guards = _guards(guard, out) if isinstance(guard, str) and guard else None
+    if guards is not None:  # a guarded row: its fingerprint covers the guard (evaluation.run)
+        fp = of_text(f"{fp}+guard:{fingerprint(guards[0])}")
     if stored_fp and fp != stored_fp:
         raise InputError("--agent", agent, f"the agent {spec} is now another agent (fingerprint {short(fp)}, "
                          f"stored {short(stored_fp)}): the replay would not be the stored "
@@ -187,7 +191,8 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
     dest = Path(dest) if dest is not None else out / "show" / safe_name(f"{agent}_{route}_{family}_{k}")
     dest.mkdir(parents=True, exist_ok=True)
     recorder = _Recorder(dest / "episode.mp4", moment_t)
-    log = run_episode(sc, iset, factory(), RunOptions(scoring=scoring), callbacks=[recorder])
+    log = run_episode(sc, iset, factory(), RunOptions(scoring=scoring), callbacks=[recorder],
+                      guard=guards[1]() if guards is not None else None)
     still = dest / "moment.png"
     if recorder.still is not None:
         write_image(still, recorder.still, f"t = {moment_t:.1f} s: {moment}")
@@ -195,3 +200,13 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
     identical = text == stored_text
     return ShowResult(rec, recorder.writer.path, still, moment_t, moment, identical,
                       "" if identical else first_difference(stored, loads_log(text)))
+
+
+def _guards(spec: str, out: Path) -> tuple:
+    """(factory, factory bound to ``out``) of a guarded row's guard ``spec`` (an LLM guard
+    answers from OUT/llm-cache; the others are the same factory twice)."""
+    from .evaluation.run import bind_guards
+    from .guards.registry import guard_factory
+
+    factory = guard_factory(spec)
+    return factory, bind_guards({spec: factory}, out).get(spec, factory)

@@ -28,6 +28,7 @@ CREATE TABLE IF NOT EXISTS episodes (
     termination_class TEXT, infractions TEXT, length REAL, duration REAL, attempts INTEGER,
     message TEXT, log BLOB, outside_m REAL DEFAULT 0, fingerprint TEXT DEFAULT '',
     model_calls INTEGER DEFAULT 0, invalid_answers INTEGER DEFAULT 0,
+    guard_checked INTEGER DEFAULT 0, guard_blocked INTEGER DEFAULT 0,
     PRIMARY KEY (agent, route_id, family, k, seed)
 );
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -164,7 +165,8 @@ class ResultStore:
 
     def _add_columns(self) -> None:
         for col, decl in (("outside_m", "REAL DEFAULT 0"), ("fingerprint", "TEXT DEFAULT ''"),
-                          ("model_calls", "INTEGER DEFAULT 0"), ("invalid_answers", "INTEGER DEFAULT 0")):
+                          ("model_calls", "INTEGER DEFAULT 0"), ("invalid_answers", "INTEGER DEFAULT 0"),
+                          ("guard_checked", "INTEGER DEFAULT 0"), ("guard_blocked", "INTEGER DEFAULT 0")):
             if col not in self._cols:
                 self._db.execute(f"ALTER TABLE episodes ADD COLUMN {col} {decl}")
                 self._cols.add(col)
@@ -205,14 +207,14 @@ class ResultStore:
             d = dict(zip(cols, r))
             if d.get("outside_m") is None:
                 d["outside_m"] = 0.0
-            for c in ("model_calls", "invalid_answers"):
+            for c in ("model_calls", "invalid_answers", "guard_checked", "guard_blocked"):
                 if d.get(c) is None:
                     d[c] = 0
             try:
                 if d["status"] == "done" and None in (d["ds"], d["rc"], d["is_"]):
                     raise TypeError("a finished episode without its scores")
                 for c in ("ds", "rc", "is_", "length", "duration", "k", "seed", "attempts", "outside_m",
-                          "model_calls", "invalid_answers"):
+                          "model_calls", "invalid_answers", "guard_checked", "guard_blocked"):
                     if d[c] is not None and (not isinstance(d[c], (int, float)) or not math.isfinite(d[c])):
                         raise TypeError(f"{c} is {d[c]!r}, not a finite number")
                 raw = json.loads(d["infractions"] or "[]")

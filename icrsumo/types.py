@@ -12,6 +12,7 @@ from .vocab import (
     Intent,
     Termination,
     TerminationClass,
+    Verdict,
 )
 
 
@@ -255,6 +256,19 @@ class ModelCall:
 
 
 @dataclass(frozen=True)
+class GuardDecision:
+    """An instruction guard's decision on one new instruction: ``t`` (s) and route ``progress``
+    (m) when it became active, its ``instruction_id``, the ``verdict`` (pass: shown to the agent;
+    block: not shown, the agent keeps the last passed one) and the guard's one-line ``reason``."""
+
+    t: float
+    progress: float
+    instruction_id: int
+    verdict: Verdict
+    reason: str = ""
+
+
+@dataclass(frozen=True)
 class EpisodeLog:
     """Everything scoring needs from one closed-loop episode, serialisable to JSON.
 
@@ -273,6 +287,9 @@ class EpisodeLog:
     ``speed_limit`` (m/s, of the nearest driving lane); empty in logs that do not record them.
     ``model_calls``: the agent's questions to a language model and their answers
     (:class:`ModelCall`; empty for agents without one, and then absent from the JSON).
+    ``guard``: an instruction guard's decisions (:class:`GuardDecision`; empty and absent from
+    the JSON without a guard); with a guard, ``instruction`` holds the id the agent was shown
+    (the last passed one; -1 before any, or for the "follow the road" shown while none passed).
     ``termination`` is a
     :class:`Termination`; ``t`` strictly increases, ``progress`` never decreases, and the
     route timeout runs from ``t[0]``.
@@ -302,6 +319,7 @@ class EpisodeLog:
     traffic_speed: tuple[float, ...] = ()
     speed_limit: tuple[float, ...] = ()
     model_calls: tuple[ModelCall, ...] = ()
+    guard: tuple[GuardDecision, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -346,7 +364,9 @@ class EpisodeRecord:
     ``length`` (m) and ``duration`` (simulated s) describe the route and the episode;
     ``outside_m`` (m): the route advance made off the driving lanes or against the traffic.
     ``model_calls`` / ``invalid_answers``: the agent's questions to a language model and how
-    many answers were invalid (0 for agents without one).
+    many answers were invalid (0 for agents without one). ``guard_checked`` /
+    ``guard_blocked``: instructions an instruction guard checked and blocked (0 without one;
+    texts the family kept unchanged and empty texts are not counted).
     """
 
     agent: str
@@ -368,3 +388,5 @@ class EpisodeRecord:
     outside_m: float = 0.0
     model_calls: int = 0
     invalid_answers: int = 0
+    guard_checked: int = 0
+    guard_blocked: int = 0

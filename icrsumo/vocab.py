@@ -126,6 +126,13 @@ class Intent(StrEnum):
     UNKNOWN = "unknown"
 
 
+class Verdict(StrEnum):
+    """An instruction guard's decision on a new instruction: shown to the agent, or not."""
+
+    PASS = "pass"
+    BLOCK = "block"
+
+
 class DecisionOutcome(StrEnum):
     """What the ego did at one decision point of its route (a junction where the route has a
     choice, or a lane change it requires): ``followed_route``; ``followed_text`` (the text and

@@ -63,6 +63,10 @@ class AgentRegistry(Mapping[str, Callable[..., Agent]]):
     :meth:`register` and :meth:`unregister`). An entry given as ``"module:attr"`` is imported
     only when it is first asked for, so the registry imports no agent module of its own."""
 
+    #: what its entries are, and the command-line option that names one (for messages)
+    kind = "agent"
+    option = "--agent"
+
     def __init__(self) -> None:
         self._entries: dict[str, AgentEntry] = {}
         #: plugin entry points that could not be registered: (name, distribution, why)
@@ -75,18 +79,18 @@ class AgentRegistry(Mapping[str, Callable[..., Agent]]):
         with whitespace, or with ``:``, which marks module:Class and remote specs), a TypeError
         when ``factory`` is neither callable nor a ``module:attr`` string."""
         if not isinstance(name, str) or not name or ":" in name or any(c.isspace() for c in name):
-            raise ValueError(f"agent name {name!r} is not valid: use a non-empty name without ':' or "
-                             f"whitespace, e.g. 'my-agent'")
+            raise ValueError(f"{self.kind} name {name!r} is not valid: use a non-empty name without ':' or "
+                             f"whitespace, e.g. 'my-{self.kind}'")
         lazy = isinstance(factory, str)
         if lazy and factory.count(":") != 1:
-            raise TypeError(f"cannot register agent {name!r}: {factory!r} is not 'module:attr'")
+            raise TypeError(f"cannot register {self.kind} {name!r}: {factory!r} is not 'module:attr'")
         if not lazy and not callable(factory):
-            raise TypeError(f"cannot register agent {name!r}: its factory {factory!r} is not callable "
-                            f"(pass the agent class or a zero-argument function)")
+            raise TypeError(f"cannot register {self.kind} {name!r}: its factory {factory!r} is not callable "
+                            f"(pass the {self.kind} class or a zero-argument function)")
         old = self._entries.get(name)
         if old is not None:
             by = old.target or _qualname(old.factory)
-            raise ValueError(f"agent {name!r} is already registered (by {by}): pick "
+            raise ValueError(f"{self.kind} {name!r} is already registered (by {by}): pick "
                              f"another name, or unregister({name!r}) first")
         entry = AgentEntry(name, None if lazy else factory, description, factory if lazy else "", plugin)
         self._entries[name] = entry
@@ -97,7 +101,8 @@ class AgentRegistry(Mapping[str, Callable[..., Agent]]):
         try:
             return self._entries.pop(name)
         except KeyError:
-            raise KeyError(f"agent {name!r} is not registered (registered: {', '.join(self)})") from None
+            raise KeyError(f"{self.kind} {name!r} is not registered "
+                           f"(registered: {', '.join(self)})") from None
 
     def entry(self, name: str) -> AgentEntry:
         return self._entries[name]
@@ -105,7 +110,7 @@ class AgentRegistry(Mapping[str, Callable[..., Agent]]):
     def __getitem__(self, name: str) -> Callable[..., Agent]:
         entry = self._entries[name]
         if entry.factory is None:
-            entry = self._entries[name] = replace(entry, factory=_load_target(name, entry))
+            entry = self._entries[name] = replace(entry, factory=_load_target(name, entry, self.option))
         return entry.factory
 
     def __contains__(self, name: object) -> bool:  # without loading a lazy entry
@@ -118,8 +123,9 @@ class AgentRegistry(Mapping[str, Callable[..., Agent]]):
         return len(self._entries)
 
 
-def _load_target(name: str, entry: AgentEntry) -> Callable[..., Agent]:
-    """The factory a lazy entry names (an InputError naming the agent when it cannot load)."""
+def _load_target(name: str, entry: AgentEntry, option: str = "--agent") -> Callable[..., Agent]:
+    """The factory a lazy entry names (an InputError naming the entry under ``option`` when it
+    cannot load)."""
     module, _, attr = entry.target.partition(":")
     where = f" (plugin of {entry.plugin})" if entry.plugin else ""
     try:
@@ -127,10 +133,10 @@ def _load_target(name: str, entry: AgentEntry) -> Callable[..., Agent]:
         for part in attr.split("."):
             obj = getattr(obj, part)
     except Exception as err:  # noqa: BLE001 - the plugin's (or our) module failed to import
-        raise InputError("--agent", name, f"cannot load {entry.target}{where} ({type(err).__name__}: {err})",
+        raise InputError(option, name, f"cannot load {entry.target}{where} ({type(err).__name__}: {err})",
                          "reinstall the package that provides it, or fix its module") from None
     if not callable(obj):
-        raise InputError("--agent", name, f"{entry.target}{where} is not callable", "name the agent class")
+        raise InputError(option, name, f"{entry.target}{where} is not callable", "name the class")
     return obj
 
 
@@ -165,13 +171,14 @@ for _name, _cls, _doc in (
 del _name, _cls, _doc
 
 
-def register_plugins(registry: AgentRegistry = REGISTRY) -> None:
+def register_plugins(registry: AgentRegistry = REGISTRY, group: str = ENTRY_POINT_GROUP) -> None:
     """Register the agents that installed packages declare in the ``icrsumo.agents``
-    entry-point group, lazily (their modules are imported when the agent is asked for); a
-    name already taken or not a valid name is skipped and kept in ``skipped_plugins``."""
+    entry-point group (or another ``group``: the guards'), lazily (their modules are imported
+    when the entry is asked for); a name already taken or not a valid name is skipped and kept
+    in ``skipped_plugins``."""
     from importlib.metadata import entry_points
 
-    for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+    for ep in sorted(entry_points(group=group), key=lambda e: e.name):
         dist = getattr(getattr(ep, "dist", None), "name", "") or "?"
         try:
             registry.register(ep.name, f"{ep.module}:{ep.attr}", description=f"plugin ({dist})", plugin=dist)

@@ -16,8 +16,8 @@ from ..agents.registry import agent_factory
 from ..agents.watch import CallWatch, Unwatched
 from ..errors import Interrupted, describe
 from ..scenario import Scenario
-from ..types import EpisodeRecord, EpisodeResult, InstructionSet
-from ..vocab import EpisodeStatus, ErrorKind, OutcomeStatus
+from ..types import EpisodeLog, EpisodeRecord, EpisodeResult, InstructionSet
+from ..vocab import EpisodeStatus, ErrorKind, OutcomeStatus, Verdict
 from .plan import Job
 
 
@@ -87,6 +87,7 @@ class EpisodeWorker:
     def __init__(self, watch: CallWatch | None = None) -> None:
         self.watch: CallWatch = watch if watch is not None else Unwatched()
         self.factories: dict[Hashable, Callable[[], Agent]] = {}
+        self.guards: dict[Hashable, Callable[[], object]] = {}
         self._scenarios: dict[str, Scenario] = {}
         self._sets: dict[str, dict[tuple[str, int], InstructionSet]] = {}
 
@@ -112,6 +113,18 @@ class EpisodeWorker:
             self.factories[ref] = factory
         return factory
 
+    def guard(self, job: Job) -> object | None:
+        """A fresh guard for ``job`` (None without one); its factory is kept per spec."""
+        if not job.guard:
+            return None
+        ref: Hashable = job.guard_factory if job.guard_factory is not None else job.guard
+        factory = self.guards.get(ref)
+        if factory is None:
+            from ..guards.registry import guard_factory
+
+            factory = self.guards[ref] = job.guard_factory or guard_factory(job.guard)
+        return factory()
+
     def run(self, job: Job) -> Outcome:
         """Run one episode and score it; every failure becomes an Outcome."""
         from ..logs import dumps_log, loads_log
@@ -121,9 +134,10 @@ class EpisodeWorker:
         try:
             factory = self.factory(job)
             sc, iset = self._inputs(job)
+            guard = self.guard(job)
             agent = WatchedAgent(factory(), self.watch)
             try:
-                log = run_episode(sc, iset, agent, RunOptions(scoring=job.scoring))
+                log = run_episode(sc, iset, agent, RunOptions(scoring=job.scoring), guard=guard)
             finally:
                 agent.close()  # the optional close() hook: e.g. a remote agent ends its session
             text = dumps_log(log)
@@ -132,7 +146,8 @@ class EpisodeWorker:
                 agent=job.agent, route_id=job.route_id, family=job.family, k=job.k, seed=job.seed,
                 status=EpisodeStatus.DONE, length=round(sc.length, 2), message=log.message,
                 model_calls=len(log.model_calls),
-                invalid_answers=sum(not c.valid for c in log.model_calls)), r)
+                invalid_answers=sum(not c.valid for c in log.model_calls),
+                **guard_counts(log, iset)), r)
             return Outcome.finished(rec, text)
         except Interrupted:  # the user's Ctrl-C (in-process runs): stop the evaluation
             raise
@@ -149,6 +164,14 @@ class EpisodeWorker:
                 with contextlib.suppress(Exception):
                     factory.close()
         self.factories.clear()
+
+
+def guard_counts(log: EpisodeLog, iset: InstructionSet) -> dict[str, int]:
+    """``guard_checked`` / ``guard_blocked`` of an episode: the guard's decisions on
+    instructions whose text is not empty and that the family did not keep unchanged."""
+    counted = {i.id for i in iset.instructions if i.text.strip() and i.template != "keep"}
+    mine = [d for d in log.guard if d.instruction_id in counted]
+    return {"guard_checked": len(mine), "guard_blocked": sum(d.verdict is Verdict.BLOCK for d in mine)}
 
 
 def with_scores(rec: EpisodeRecord, r: EpisodeResult) -> EpisodeRecord:

@@ -61,6 +61,9 @@ class EvalOptions:
     scoring: str = "lb1"
     #: agent names whose stored episodes (of another fingerprint) are deleted and run again
     replace_agents: tuple[str, ...] = ()
+    #: instruction guards (``--guard``): every agent also runs behind each, as its own rows
+    #: ``AGENT+guard:NAME`` (:mod:`icrsumo.guards`)
+    guards: tuple[str, ...] = ()
 
     def check(self) -> None:
         """InputErrors for bad values (agent specs are checked when they are resolved)."""

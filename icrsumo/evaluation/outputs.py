@@ -25,7 +25,8 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     (``episodes.stored_not_in_report``) and named on stderr, never dropped silently."""
     from ..aggregate import summarize
     from ..attribution import attach
-    from ..report import write_attribution, write_report
+    from ..guards.measure import guard_doc, text_holdout
+    from ..report import write_attribution, write_guard, write_report
 
     families = tuple(f for f in ALL_FAMILIES if f in opts.families)  # canonical order
     summary = summarize(records, suite=opts.suite, seed=opts.seed, k=opts.k, families=families)
@@ -45,6 +46,14 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
               f"not in this report (icrsumo report {out} shows all)", file=sys.stderr)
     table = write_report(summary, records, out, ends)
     write_attribution(summary, attribution, out)
+    guards = guard_doc(summary, records)
+    if guards is not None:
+        if any(r["guard"] == "text" for r in guards["rows"].values()):
+            from ..guards.text import TextGuard
+            from ..instructions.banks import load_banks
+
+            guards["text_holdout"] = text_holdout(TextGuard(), load_banks())
+        write_guard(guards, out)
     write_html(out, summary, records, attribution, store, scenarios, instr_dir)
     try:
         rollout_figure(opts, out, store, records, scenarios, instr_dir)

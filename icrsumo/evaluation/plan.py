@@ -13,6 +13,7 @@ from ..agents.base import Agent
 from ..convert import CONVERTER_VERSION, ConvertOptions, convert_routes, safe_name
 from ..errors import InputError
 from ..fsio import OutFolder, dumps_json, read_json, write_atomic
+from ..guards.base import guarded_name
 from ..instructions.baseline_bank import BaselineBank, load_baseline_bank
 from ..instructions.families import FAMILIES
 from ..instructions.generate import GenerateOptions, generate
@@ -40,6 +41,10 @@ class Job:
     factory: Callable[[], Agent] | None = field(default=None, compare=False)
     #: the scoring rules (:data:`icrsumo.metrics.SCORINGS`) of the stored record
     scoring: str = "lb1"
+    #: the instruction guard's spec ("" for none) and, where the workers cannot build it from
+    #: the spec (an LLM guard bound to the out folder), its factory
+    guard: str = ""
+    guard_factory: Callable[[], object] | None = field(default=None, compare=False)
 
     @property
     def key(self) -> tuple[str, str, str, int, int]:
@@ -187,9 +192,11 @@ def check_route_ids(opts: EvalOptions, routes: Iterable[str]) -> None:
                          f"use one of {shown}" if not opts.routes else "use one of the --routes")
 
 
-def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mapping[str, str]) -> list[Job]:
-    """Every episode of the protocol, in a fixed order (agent, route, family, k); ``names``:
-    agent spec -> the name its results are stored under."""
+def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mapping[str, str],
+              guard_names: Mapping[str, str] | None = None) -> list[Job]:
+    """Every episode of the protocol, in a fixed order (agent, guard, route, family, k);
+    ``names``: agent spec -> the name its results are stored under; ``guard_names``: guard spec
+    -> its name (each agent runs unguarded, then behind each of ``opts.guards``)."""
     scs = []
     for d in find_scenarios(scenarios):
         try:
@@ -200,11 +207,14 @@ def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mappin
         check_route_ids(opts, [sc.route_id for _, sc in scs])
         scs = [(d, sc) for d, sc in scs if sc.route_id in set(opts.routes)]
     sets = [("baseline", 0)] + [(f, k) for f in opts.families for k in range(variants_of(f, opts.k))]
+    guard_names = guard_names or {}
     jobs = []
     for spec in opts.agents:
-        for d, sc in scs:
-            instr = str(instr_dir / f"{safe_name(sc.route_id)}.json")
-            for fam, k in sets:
-                jobs.append(Job(spec, names[spec], sc.route_id, fam, k, opts.seed, str(d), instr,
-                                device=opts.agent_device, scoring=opts.scoring))
+        for guard in ("", *opts.guards):
+            name = guarded_name(names[spec], guard_names.get(guard, guard)) if guard else names[spec]
+            for d, sc in scs:
+                instr = str(instr_dir / f"{safe_name(sc.route_id)}.json")
+                for fam, k in sets:
+                    jobs.append(Job(spec, name, sc.route_id, fam, k, opts.seed, str(d), instr,
+                                    device=opts.agent_device, scoring=opts.scoring, guard=guard))
     return jobs

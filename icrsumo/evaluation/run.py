@@ -19,6 +19,7 @@ from ..agents.registry import (
 )
 from ..errors import InputError, check_seed, expect
 from ..fsio import read_json
+from ..guards.base import guarded_name
 from ..instructions.families import ALL_FAMILIES, FAMILIES
 from ..metrics import SCORINGS, score_episode, scoring_names
 from ..store import ResultStore
@@ -94,24 +95,48 @@ def carries_factory(spec: str) -> bool:
     return spec.startswith((PYTHON_PREFIX, LLM_PREFIX))
 
 
-def with_factories(jobs: list[Job], factories: Mapping[str, Callable]) -> list[Job]:
-    """``jobs`` with their factory where they must carry it (:func:`carries_factory`)."""
-    return [replace(j, factory=factories[j.agent_spec]) if carries_factory(j.agent_spec) else j for j in jobs]
+def with_factories(jobs: list[Job], factories: Mapping[str, Callable],
+                   guards: Mapping[str, Callable] | None = None) -> list[Job]:
+    """``jobs`` with their factory where they must carry it (:func:`carries_factory`), and with
+    their guard's factory where it is bound to the out folder (an LLM guard: ``guards``)."""
+    guards = guards or {}
+    jobs = [replace(j, factory=factories[j.agent_spec]) if carries_factory(j.agent_spec) else j for j in jobs]
+    return [replace(j, guard_factory=guards[j.guard]) if j.guard in guards else j for j in jobs]
+
+
+def bind_guards(guards: Mapping[str, Callable], out: Path) -> dict[str, Callable]:
+    """The guards bound to the out folder (those with a ``bind(out)`` method: an LLM guard's
+    response cache), by spec; the others are built by the workers from their spec."""
+    return {spec: f.bind(out) for spec, f in guards.items() if callable(getattr(type(f), "bind", None))}
+
+
+def resolve_guards(specs: tuple[str, ...]) -> dict[str, Callable]:
+    """Guard spec -> guard factory for every spec (:func:`icrsumo.guards.registry.guard_factory`);
+    an InputError for an unknown one, before any episode runs."""
+    from ..guards.registry import guard_factory
+
+    out: dict[str, Callable] = {}
+    for spec in specs:
+        if spec not in out:
+            out[spec] = guard_factory(spec)
+    return out
 
 
 @dataclass(frozen=True)
 class AgentIds:
     """The agents of one run: ``names`` (spec -> the name its episodes are stored under) and
-    ``fingerprints`` (name -> :func:`icrsumo.agents.identity.fingerprint`); ``specs``: one spec
-    per name, in the order given (two specs of one agent run once)."""
+    ``fingerprints`` (name -> :func:`icrsumo.agents.identity.fingerprint`; a guarded row's
+    covers its agent and its guard); ``specs``: one spec per name, in the order given (two specs
+    of one agent run once); ``guard_names``: guard spec -> the name in its rows."""
 
     names: Mapping[str, str]
     fingerprints: Mapping[str, str]
     specs: tuple[str, ...]
+    guard_names: Mapping[str, str] = field(default_factory=dict)
 
     def config(self) -> dict[str, dict[str, str]]:
         """The ``agents`` entry of OUT/config.json: name -> fingerprint and the spec that rebuilds
-        the agent (an agent file's path made absolute)."""
+        the agent (an agent file's path made absolute); a guarded row also names its ``guard``."""
         out = {}
         for spec in self.specs:
             name, shown = self.names[spec], spec
@@ -119,13 +144,19 @@ class AgentIds:
             if sep and target.endswith(".py") and not spec.startswith("remote:"):
                 shown = f"{Path(target).resolve()}:{cls}"
             out[name] = {"fingerprint": self.fingerprints[name], "spec": shown}
+            for guard, gname in self.guard_names.items():
+                row = guarded_name(name, gname)
+                out[row] = {"fingerprint": self.fingerprints[row], "spec": shown, "guard": guard}
         return out
 
 
-def identify_agents(factories: Mapping[str, Callable], replacing: tuple[str, ...] = ()) -> AgentIds:
-    """Names and fingerprints of resolved agents; an InputError when two different agents
-    (other fingerprints) share a name, or when ``replacing`` names no agent of the run."""
-    from ..agents.identity import fingerprint, short
+def identify_agents(factories: Mapping[str, Callable], replacing: tuple[str, ...] = (),
+                    guards: Mapping[str, Callable] | None = None) -> AgentIds:
+    """Names and fingerprints of resolved agents and of their guarded rows (``guards``: guard
+    spec -> factory); an InputError when two different agents (other fingerprints) share a name,
+    when two guards share a name, or when ``replacing`` names no agent of the run."""
+    from ..agents.identity import fingerprint, of_text, short
+    from ..guards.registry import guard_name
 
     names: dict[str, str] = {}
     fps: dict[str, str] = {}
@@ -140,11 +171,21 @@ def identify_agents(factories: Mapping[str, Callable], replacing: tuple[str, ...
                              "into separate --out folders")
         fps.setdefault(name, fp)
         first.setdefault(name, spec)
+    gnames: dict[str, str] = {}
+    for gspec, gfactory in (guards or {}).items():
+        gname = gnames[gspec] = guard_name(gspec, gfactory)
+        other = next((s for s, n in gnames.items() if n == gname and s != gspec), None)
+        if other is not None:
+            raise InputError("--guard", gspec, f"is named {gname!r}, as {other} is",
+                             "give one of them another name (the guard class's name attribute)")
+        gfp = fingerprint(gfactory)
+        for name in list(dict.fromkeys(names.values())):
+            fps[guarded_name(name, gname)] = of_text(f"{fps[name]}+guard:{gfp}")
     for name in replacing:
         if name not in fps:
             raise InputError("--replace-agent", name, "is not an agent of this run",
                              f"name one of {', '.join(sorted(fps))}")
-    return AgentIds(names, fps, tuple(first.values()))
+    return AgentIds(names, fps, tuple(first.values()), gnames)
 
 
 def check_agents(store_path: Path, ids: AgentIds, replacing: tuple[str, ...]) -> None:
@@ -170,16 +211,18 @@ def run_evaluation(opts: EvalOptions) -> EvalResult:
     is written (options, agents, the out folder's configuration and store, the suite)."""
     opts.check()
     factories = resolve_agents(opts.agents)
-    ids = identify_agents(factories, opts.replace_agents)
+    guards = resolve_guards(opts.guards)
+    ids = identify_agents(factories, opts.replace_agents, guards)
     opts = replace(opts, agents=ids.specs)
     names = ids.names
     out = Path(opts.out)
     check_agents(out / "results.sqlite", ids, opts.replace_agents)
     factories = bind_agents(factories, out)
+    bound_guards = bind_guards(guards, out)
     prep = prepare_suite(opts, ids.config())
     written = set(prep.routes)
-    jobs = with_factories([j for j in plan_jobs(opts, prep.scenarios, prep.instructions, names)
-                           if j.route_id in written], factories)
+    planned = plan_jobs(opts, prep.scenarios, prep.instructions, names, ids.guard_names)
+    jobs = with_factories([j for j in planned if j.route_id in written], factories, bound_guards)
     with ResultStore(out / "results.sqlite", verify=False) as store:  # checked above
         claim_agents(store, ids, opts.replace_agents)
         check_stored_routes(opts, store, set(names.values()), written, prep.skipped)

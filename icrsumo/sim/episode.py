@@ -28,6 +28,8 @@ from pathlib import Path
 from ..agents.base import Action, Agent, EpisodeInfo, Observation, World, validate_action
 from ..control import WaypointController, WaypointPath
 from ..dynamics import Control, EgoState, VehicleParams, step
+from ..guards.base import Guard, guarded_name
+from ..guards.stream import GuardedStream
 from ..networks import load_net
 from ..render import BevRenderer, BevSpec
 from ..scenario import Scenario
@@ -90,7 +92,8 @@ class Episode:
 
     def __init__(self, scenario: Scenario, instructions: InstructionSet,
                  options: RunOptions = RunOptions(), *, privileged: bool = False,  # noqa: B008
-                 needs_route: bool = False, callbacks: Sequence[EpisodeCallback] = ()) -> None:
+                 needs_route: bool = False, callbacks: Sequence[EpisodeCallback] = (),
+                 guard: Guard | None = None) -> None:
         self.scenario, self.instructions = scenario, instructions
         self.options, self.privileged, self.needs_route = options, privileged, needs_route
         self.net = net = load_net(scenario.net)
@@ -112,6 +115,8 @@ class Episode:
         self.triggers = [i.trigger for i in self.instr]
         self.texts = [i.rendered() for i in self.instr]
         self.notices = instructions.notices
+        #: the instruction guard between the stream and the agent (None: every one is shown)
+        self.guarded = None if guard is None else GuardedStream(guard, scenario, net, self.instr, self.texts)
         self.controller = WaypointController(params)
         #: what the agent is told at reset
         self.info = EpisodeInfo(route_id=scenario.route_id, town=scenario.town, net=str(scenario.net),
@@ -138,6 +143,8 @@ class Episode:
             MIN_TIMEOUT_LB2 + self.route.length / 0.1
         self.n_max = int((budget + 10.0) / self.dt) + 10
         self.k_instr = -1
+        #: the index of the instruction the agent is shown (k_instr, unless a guard blocked it)
+        self.k_shown = -1
         self.i = 0
         #: the ego's lane -> the lights the sensors need in this step's frame
         self._lights = lambda lane: self.sensors.lights_needed(self.sensor_state, lane)
@@ -184,6 +191,8 @@ class Episode:
         """Start SUMO, warm up, insert the ego; the first observation (None: ended at once)."""
         for cb in self.callbacks:
             cb.on_start(self)
+        if self.guarded is not None:
+            self.guarded.reset()
         self.backend = backend = SumoBackend(self.scenario)
         backend.start()
         scenario, params = self.scenario, self.params
@@ -258,6 +267,9 @@ class Episode:
         events, ss = self.sensors.detect(self.sensor_state, frame, state, progress)
         self.sensor_state = ss
         k = self.k_instr = _active(self.triggers, progress)
+        if self.guarded is not None:
+            k = self.guarded.shown(k, t, progress)
+        self.k_shown = k
         rec = StepRecord(t, state.x, state.y, state.yaw, state.speed, progress,
                          self.instr[k].id if k >= 0 else -1, ss.outside, mon.route_dist, tuple(events),
                          frame.traffic_speed, ss.speed_limit)
@@ -272,7 +284,7 @@ class Episode:
 
     def _observation(self) -> Observation:
         """The agent's observation at the current step (BEV, speed, instruction, notice)."""
-        state, params, progress, k_instr = self.state, self.params, self.progress, self.k_instr
+        state, params, progress, k_instr = self.state, self.params, self.progress, self.k_shown
         frame = self.frame
         notice = ""
         for n in self.notices:
@@ -292,7 +304,8 @@ class Episode:
                           tl_states=frame.tl_states, route=self.ego_route if self.needs_route else None,
                           progress=progress)
         obs = Observation(t=frame.t, bev=bev, speed=state.speed,
-                          instruction=self.texts[k_instr] if k_instr >= 0 else "",
+                          instruction=self.texts[k_instr] if k_instr >= 0 else
+                          self.guarded.text(k_instr) if self.guarded is not None else "",
                           instruction_id=self.instr[k_instr].id if k_instr >= 0 else -1,
                           notice=notice, world=world)
         for cb in callbacks:
@@ -313,21 +326,25 @@ class Episode:
             traffic_speed=tuple(cols["traffic_speed"]), speed_limit=tuple(cols["speed_limit"]),
             termination=self.termination, termination_t=self.term_t, message=self.message,
             route=self.polyline,
+            guard=tuple(self.guarded.decisions) if self.guarded is not None else (),
         )
 
 
 def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
                 options: RunOptions = RunOptions(),  # noqa: B008
-                callbacks: Sequence[EpisodeCallback] = ()) -> EpisodeLog:
+                callbacks: Sequence[EpisodeCallback] = (), guard: Guard | None = None) -> EpisodeLog:
     """Drive one episode with ``agent`` and return its log (:class:`icrsumo.types.EpisodeLog`).
 
     The agent is reset with the episode's :class:`EpisodeInfo`, then acts on every observation;
     ``callbacks`` (:mod:`icrsumo.sim.callbacks`) attach side effects such as timings or video.
     A privileged agent (``privileged = True``) sees the :class:`World` view, with the route only
     when it also declares ``needs_route = True``. An agent with an ``episode_calls()`` method
-    (one that asks a language model) has what it returns stored as the log's ``model_calls``."""
+    (one that asks a language model) has what it returns stored as the log's ``model_calls``.
+    With a ``guard`` (:mod:`icrsumo.guards`) each new instruction passes it before the agent
+    sees it; its decisions are the log's ``guard`` and the log is named ``AGENT+guard:NAME``."""
     with Episode(scenario, instructions, options, privileged=bool(getattr(agent, "privileged", False)),
-                 needs_route=bool(getattr(agent, "needs_route", False)), callbacks=callbacks) as ep:
+                 needs_route=bool(getattr(agent, "needs_route", False)), callbacks=callbacks,
+                 guard=guard) as ep:
         agent.reset(ep.info)
         obs = ep.start()
         hooks = ep.callbacks[1:]  # the recorder needs no act hooks
@@ -338,6 +355,7 @@ def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
             for cb in hooks:
                 cb.on_act_end(ep, action)
             obs = ep.step(action)
-    log = ep.log(getattr(agent, "name", type(agent).__name__))
+    name = getattr(agent, "name", type(agent).__name__)
+    log = ep.log(name if ep.guarded is None else guarded_name(name, ep.guarded.name))
     calls = getattr(agent, "episode_calls", None)  # an agent that asks a language model
     return replace(log, model_calls=tuple(calls())) if callable(calls) else log
