@@ -52,7 +52,13 @@ Pipeline
      itself bends ("follow the road as it curves left"). Elliptical directions count: a clause
      that is only "Right (up) ahead", and "then it's a right" (copula + "a" + side).
    * A clause that forbids ("turning right is prohibited", "left turns are not allowed",
-     "straight is closed") contributes nothing.
+     "straight is closed") contributes nothing, and so does a clause about another road user's
+     maneuver: one opening with a road user ("the black car", "a motorbike", "the bus in front
+     of you") followed, past a place ("ahead", "in the left lane"), by a verb of its own ("is
+     turning left", "will turn", "wants to merge"); it asks the ego for nothing.
+   * Commands that are no maneuver: driving faster ("speed up", "go faster", "accelerate", "pick
+     up the pace") is FOLLOW; being dropped off or let out ("drop me off", "let us out") is STOP.
+     "Stay / keep right at the fork (the Y-junction, the split)" is a turn.
    * Roundabouts (roundabout/rotary/traffic circle anywhere in the text): exit ordinals map
      1st -> RIGHT, 2nd -> STRAIGHT, 3rd and later -> LEFT ("third exit", "3rd exit",
      "exit 2", "take the first one", "exit at the second opportunity", "leave the roundabout
@@ -198,6 +204,27 @@ _BEND = _words("curves curve bends bend winds sweeps turns veers swings")
 _BEND_SUBJECT = _ROAD | _words("it")
 _TRAVERSE = _words("through across over past")
 _AHEAD_VERBS = _MOTION | _words("continue proceed carry keep")
+#: other road users: a clause opening with one of them and a verb of its own asks nothing of the ego
+_ROAD_USERS = _words(
+    "car cars truck trucks lorry lorries bus buses van vans cyclist cyclists bike bikes bicycle bicycles "
+    "biker bikers motorbike motorbikes motorcycle motorcycles scooter scooters taxi taxis cab vehicle "
+    "vehicles pedestrian pedestrians tractor tractors driver drivers ambulance tram trams suv jeep sedan "
+    "coach someone somebody"
+)
+_THIRD_DETS = _words("that those these some another every")
+#: words of a place after the road user ("ahead", "behind you", "in front of you", "in the left lane")
+_PLACE_WORDS = _words("ahead behind in front of you the left right lane on your next to beside there here "
+                      "black white red blue grey gray silver green yellow big small")
+_THIRD_VERBS = _words(
+    "is are was were will would wants want seems seem has have keeps plans intends starts tries about "
+    "turns turning changes changing merges merging overtakes overtaking goes going pulls pulling moves moving"
+)
+#: a fork's place ("stay right at the fork / the Y-junction / where it splits")
+_FORK_PLACE = _JUNCTION | _words("fork forks split y")
+_FASTER = _words("accelerate accelerating faster quicker")
+_PACE = _words("pace speed")
+_US = _words("me us")
+_NO_MANEUVER = _FASTER | _words("speed drop let pick")
 _STOP_HEADS = _words(
     "stop stops stopping halt standstill brake brakes braking wait waiting park pull stand stay hold"
 )
@@ -724,6 +751,8 @@ def _is_direction(c: tuple[str, ...], i: int) -> bool:
     if i == 0 and "ahead" in c[1:] and set(c[1:]) <= {"up", "ahead", "just"}:
         return True  # the whole clause is "Right (up) ahead."
     if nxt in _RIGHT_PLACE_NEXT:
+        if prev in ("stay", "keep") and nxt == "at" and any(t in _FORK_PLACE for t in c[i + 2:i + 5]):
+            return True  # "stay right at the fork / the Y-junction"
         return prev not in _STATIC_PREV  # "stop right at the line" vs "hda right at the junction"
     return nxt not in _RIGHT_INTENSIFIED
 
@@ -964,6 +993,32 @@ def _follow(c: tuple[str, ...], i: int, tok: str, nxt: str) -> tuple[Intent, int
     return (Intent.FOLLOW, _WEAK) if follow else None
 
 
+def _third_party(c: tuple[str, ...]) -> bool:
+    """A clause about another road user ("the black car is turning left", "a motorbike is
+    changing into the right lane", "the bus in front of you will turn left"): it opens with a
+    noun phrase headed by a road user, then (past a place: "ahead", "behind you", "in the left
+    lane") an auxiliary or a verb of its own. Its directions ask the ego for nothing."""
+    head = next((k for k in range(min(len(c), 5)) if c[k] in _ROAD_USERS), None)
+    if head is None or (head and c[0] not in _DETS | _THIRD_DETS):
+        return False
+    if any(t in _DIRECTIVE or t in _LANE_VERBS for t in c[1:head]):
+        return False
+    k = head + 1
+    while k < len(c) and c[k] in _PLACE_WORDS:
+        k += 1
+    return k < len(c) and c[k] in _THIRD_VERBS
+
+
+def _speed_or_drop_off(c: tuple[str, ...], words: set[str]) -> Intent | None:
+    """Commands that are no maneuver: driving faster ("speed up", "go faster", "accelerate",
+    "pick up the pace") keeps to the road (FOLLOW); being dropped off / let out is a STOP."""
+    if words & _FASTER or ("speed" in words and "up" in words) or ({"pick", "up"} <= words and words & _PACE):
+        return Intent.FOLLOW
+    if ("drop" in words and "off" in words) or ("let" in words and "out" in words and words & _US):
+        return Intent.STOP
+    return None
+
+
 def _is_copular(c: tuple[str, ...], words: set[str]) -> bool:
     """A descriptive clause: a copula, no driving verb, no progressive ("the exit is on your left")."""
     if not words & _COPULA or words & _DIRECTIVE or words & _MODAL or c[0] in _COPULA or c[0] == "please":
@@ -979,6 +1034,11 @@ def _bends(c: tuple[str, ...]) -> bool:
 def _clause_mentions(c: tuple[str, ...], alt: bool, ctx: tuple[bool, bool, bool]) -> list[_Mention]:
     """Surviving (non-negated, highest-level) mentions of one clause."""
     words = set(c)
+    if words & _ROAD_USERS and _third_party(c):  # another road user's maneuver: none of ours
+        return [(Intent.STOP, _NOTICE, alt)] if _is_notice(c, words) else []
+    other = _speed_or_drop_off(c, words) if words & _NO_MANEUVER else None
+    if other is not None:
+        return [(other, _STRONG if other is Intent.STOP else _WEAK, alt)]
     if not words & _TRIGGERS_OR_NEG:
         return [(Intent.STOP, _NOTICE, alt)] if _is_notice(c, words) else []
     neg, extra = _negation(c) if words & _NEGATOR_HEADS else ([False] * len(c), [])
