@@ -141,37 +141,37 @@ class LLMSettings:
         return f"{LLM_PREFIX}{self.model}" + ("+image" if self.image else "")
 
 
-def parse_spec(spec: str) -> LLMSettings:
+def parse_spec(spec: str, option: str = "--agent") -> LLMSettings:
     """The settings of ``llm:MODEL@URL[?key_env=VAR&image=1&format=F&timeout=S&seed=N]``
-    (InputErrors naming the part that is wrong)."""
+    (InputErrors naming ``option`` and the part that is wrong)."""
     rest = spec[len(LLM_PREFIX):] if spec.startswith(LLM_PREFIX) else spec
     at = max(rest.rfind("@http://"), rest.rfind("@https://"))
     example = "use llm:MODEL@http://127.0.0.1:8080/v1"
     if at <= 0:
-        raise InputError("--agent", spec, "an llm agent needs a model and a server URL", example)
+        raise InputError(option, spec, "an llm spec needs a model and a server URL", example)
     model, url = rest[:at], rest[at + 1:]
     if not model.strip() or any(c.isspace() for c in model):
-        raise InputError("--agent", spec, f"model {model!r} is empty or has spaces", example)
+        raise InputError(option, spec, f"model {model!r} is empty or has spaces", example)
     parts = urllib.parse.urlsplit(url)
     if not is_http(url):
-        raise InputError("--agent", spec, f"{url!r} is not an http:// or https:// URL", example)
+        raise InputError(option, spec, f"{url!r} is not an http:// or https:// URL", example)
     query = urllib.parse.parse_qs(parts.query, keep_blank_values=True)
     endpoint = urllib.parse.urlunsplit((parts.scheme, parts.netloc, parts.path, "", ""))
     known = {"key_env", "image", "format", "timeout", "seed"}
     unknown = sorted(set(query) - known)
     if unknown:
-        raise InputError("--agent", spec, f"unknown option {unknown[0]!r}", f"use {', '.join(sorted(known))}")
+        raise InputError(option, spec, f"unknown option {unknown[0]!r}", f"use {', '.join(sorted(known))}")
     one = {k: v[-1] for k, v in query.items()}
     s = LLMSettings(model=model, endpoint=endpoint)
     if "key_env" in one:
-        s = replace(s, key_env=check_key_env(one["key_env"], "--agent", spec))
+        s = replace(s, key_env=check_key_env(one["key_env"], option, spec))
     if "image" in one:
         if one["image"] not in ("0", "1", "true", "false"):
-            raise InputError("--agent", spec, f"image={one['image']!r}", "use image=1 or image=0")
+            raise InputError(option, spec, f"image={one['image']!r}", "use image=1 or image=0")
         s = replace(s, image=one["image"] in ("1", "true"))
     if "format" in one:
         if one["format"] not in FORMATS:
-            raise InputError("--agent", spec, f"format={one['format']!r}", f"use one of {', '.join(FORMATS)}")
+            raise InputError(option, spec, f"format={one['format']!r}", f"use one of {', '.join(FORMATS)}")
         s = replace(s, format=one["format"])
     if "timeout" in one:
         try:
@@ -179,11 +179,11 @@ def parse_spec(spec: str) -> LLMSettings:
         except ValueError:
             timeout = math.nan
         if not (math.isfinite(timeout) and 0 < timeout <= 3600):
-            raise InputError("--agent", spec, f"timeout={one['timeout']!r}", "use seconds between 0 and 3600")
+            raise InputError(option, spec, f"timeout={one['timeout']!r}", "use seconds between 0 and 3600")
         s = replace(s, timeout=timeout)
     if "seed" in one:
         if not re.fullmatch(r"\d{1,9}", one["seed"]):
-            raise InputError("--agent", spec, f"seed={one['seed']!r}", "use a non-negative integer")
+            raise InputError(option, spec, f"seed={one['seed']!r}", "use a non-negative integer")
         s = replace(s, seed=int(one["seed"]))
     return s
 
@@ -206,14 +206,14 @@ def with_options(spec: str, key_env: str | None = None, image: bool = False) -> 
     return spec + ("&" if "?" in spec.rpartition("@")[2] else "?") + "&".join(extra)
 
 
-def api_key(s: LLMSettings) -> str | None:
+def api_key(s: LLMSettings, option: str = "--agent") -> str | None:
     """The API key from the variable ``s.key_env`` names (None when none is named); an
-    InputError when the variable is not set."""
+    InputError (naming ``option``) when the variable is not set."""
     if not s.key_env:
         return None
     key = os.environ.get(s.key_env, "")
     if not key.strip():
-        raise InputError("--agent", s.name, f"the API key variable {s.key_env} is not set",
+        raise InputError(option, s.name, f"the API key variable {s.key_env} is not set",
                          f"export {s.key_env}=... before the run, or drop key_env for a server without a key")
     return key.strip()
 
@@ -342,6 +342,11 @@ class Asker:
 
     def ask(self, body: dict) -> tuple[str, Answer]:
         """(cache key, answer) of the request ``body``."""
+        key, rec = self.record(body)
+        return key, answer_of(rec)
+
+    def record(self, body: dict) -> tuple[str, dict]:
+        """(cache key, cache record: ``content`` or ``problem``) of the request ``body``."""
         key = request_hash(body)
         rec = self.memory.get(key)
         if rec is None and self.cache is not None:
@@ -353,7 +358,7 @@ class Asker:
             if self.cache is not None:
                 self.cache.put(key, body, **rec)
         self.memory[key] = rec
-        return key, answer_of(rec)
+        return key, rec
 
     def _fetch(self, body: dict) -> dict:
         s = self.settings
@@ -557,22 +562,22 @@ class LLMFactory:
         return LLMFollower(self.settings)
 
 
-def check_server(s: LLMSettings, has_cache: bool) -> bool:
+def check_server(s: LLMSettings, has_cache: bool, option: str = "--agent") -> bool:
     """Check the API key variable and that the server answers and serves ``s.model``;
-    InputErrors naming the fix. Returns True (offline) when the server is unreachable but
-    ``has_cache`` (the run is answered from the cache)."""
-    key = api_key(s)
+    InputErrors naming ``option`` and the fix. Returns True (offline) when the server is
+    unreachable but ``has_cache`` (the run is answered from the cache)."""
+    key = api_key(s, option)
     start = "start it (e.g. icrsumo serve-llm --port 8080 for SmolLM2), or fix the URL"
     try:
         models = served_models(s.endpoint, api_key=key, timeout=min(s.timeout, 10.0))
     except Transport as err:
         if err.unreachable and has_cache:
             return True
-        raise InputError("--agent", s.name, f"the LLM server {s.endpoint} does not answer ({err})",
+        raise InputError(option, s.name, f"the LLM server {s.endpoint} does not answer ({err})",
                          start if err.unreachable else "check the server and its API key") from None
     if models is not None and s.model not in models:
         shown = ", ".join(models[:8]) + (", ..." if len(models) > 8 else "")
-        raise InputError("--agent", s.name, f"the LLM server {s.endpoint} does not serve model {s.model!r} "
+        raise InputError(option, s.name, f"the LLM server {s.endpoint} does not serve model {s.model!r} "
                          f"(it serves: {shown or 'none'})", "name a model it serves after llm:")
     return False
 
