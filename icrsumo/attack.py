@@ -34,11 +34,12 @@ from .evaluation.plan import Job, plan_jobs, prepare_suite
 from .evaluation.progress import Progress
 from .evaluation.run import (
     bind_agents,
-    carries_factory,
+    bind_guards,
     check_agents,
     claim_agents,
     identify_agents,
     resolve_agents,
+    resolve_guards,
     run_queue,
     with_factories,
 )
@@ -76,6 +77,8 @@ class AttackOptions:
     agent_timeout: float | None = 60.0
     #: agent names whose stored episodes of another agent of that name are deleted and run again
     replace_agents: tuple[str, ...] = ()
+    #: instruction guards: every agent is also attacked behind each (rows ``AGENT+guard:NAME``)
+    guards: tuple[str, ...] = ()
 
     def eval_options(self) -> EvalOptions:
         """The evaluation options of the out folder (K = 1: the generated variants go unused)."""
@@ -92,6 +95,7 @@ class AttackOptions:
             quiet=self.quiet,
             agent_timeout=self.agent_timeout,
             replace_agents=self.replace_agents,
+            guards=self.guards,
         )
 
     def check(self) -> None:
@@ -128,6 +132,8 @@ class _Search:
     results: list[tuple[int, float, str]] = field(default_factory=list)  # (query, DS, termination class)
     first_success: int | None = None
     pending: dict[int, int] = field(default_factory=dict)  # the choice of the query under way
+    #: the route's baseline job: the search's episodes are it with other instructions
+    job: Job | None = None
 
     def propose(self, q: int) -> InstructionSet:
         positions = sorted(self.pools)
@@ -172,18 +178,21 @@ def run_attack(opts: AttackOptions) -> dict:
     opts.check()
     eopts = opts.eval_options()
     factories = resolve_agents(opts.agents)
-    ids = identify_agents(factories, opts.replace_agents)
+    guards = resolve_guards(opts.guards)
+    ids = identify_agents(factories, opts.replace_agents, guards)
     eopts = replace(eopts, agents=ids.specs)
     names = dict(ids.names)
     out = Path(opts.out)
     check_agents(out / "results.sqlite", ids, opts.replace_agents)
     factories = bind_agents(factories, out)
+    bound_guards = bind_guards(guards, out)
     prep = prepare_suite(eopts, ids.config())
     for line in prep.skipped:
         print(f"icrsumo: skipped: {line}", file=sys.stderr)
     jobs = with_factories([
-        j for j in plan_jobs(eopts, prep.scenarios, prep.instructions, names) if j.route_id in prep.routes
-    ], factories)
+        j for j in plan_jobs(eopts, prep.scenarios, prep.instructions, names, ids.guard_names)
+        if j.route_id in prep.routes
+    ], factories, bound_guards)
     banks = load_banks(None)
     with ResultStore(out / "results.sqlite", verify=False) as store:  # checked above
         claim_agents(store, ids, opts.replace_agents)
@@ -219,6 +228,7 @@ def run_attack(opts: AttackOptions) -> dict:
                         rng,
                         b.ds,
                         current_ds=b.ds,
+                        job=j,
                     )
                 )
             folder = out / "attack" / opts.constraint
@@ -228,12 +238,7 @@ def run_attack(opts: AttackOptions) -> dict:
                     s.sets.append(s.propose(q))
                     path = folder / safe_name(s.agent) / f"{safe_name(s.route)}.json"
                     _write_sets(path, s, [])
-                    batch.append(
-                        Job(
-                            s.spec, s.agent, s.route, Family.ATTACK.value, q, opts.seed, s.scenario,
-                            str(path), factory=factories[s.spec] if carries_factory(s.spec) else None,
-                        )
-                    )
+                    batch.append(replace(s.job, family=Family.ATTACK.value, k=q, instructions=str(path)))
                 have = store.keys()
                 todo = [j for j in batch if j.key not in have]
                 for _ in range(len(batch) - len(todo)):
@@ -277,8 +282,7 @@ def _transfer(
     agents = sorted({j.agent for j in jobs})
     if len(agents) < 2:
         return {}
-    spec_of = {j.agent: j.agent_spec for j in jobs}
-    factory_of = {j.agent: j.factory for j in jobs}
+    job_of = {j.agent: j for j in jobs}
     base = _baselines(store)
     batch = []
     for s in searches:
@@ -299,19 +303,9 @@ def _transfer(
         for other in agents:
             b = base.get((other, s.route))
             if other != s.agent and b is not None and b.status == "done" and b.termination_class == "done":
-                batch.append(
-                    Job(
-                        spec_of[other],
-                        other,
-                        s.route,
-                        Family.TRANSFER.value,
-                        _agent_id(s.agent),
-                        opts.seed,
-                        s.scenario,
-                        str(path),
-                        factory=factory_of[other],
-                    )
-                )
+                batch.append(replace(job_of[other], route_id=s.route, scenario=s.scenario,
+                                     family=Family.TRANSFER.value, k=_agent_id(s.agent),
+                                     instructions=str(path)))
     have = store.keys()
     with Progress(len(batch), opts.quiet) as progress:
         run_queue([j for j in batch if j.key not in have], eopts, store, progress)
@@ -358,7 +352,7 @@ def _document(
     opts: AttackOptions, names: dict, searches: list[_Search], transfer: dict, jobs: list[Job], base: dict
 ) -> dict:
     agents: dict[str, dict] = {}
-    for agent in sorted(set(names.values())):
+    for agent in sorted(set(names.values()) | {j.agent for j in jobs}):  # guarded rows too
         mine = [s for s in searches if s.agent == agent]
         completed = [
             j.route_id

@@ -208,6 +208,7 @@ def _cmd_attack(args: argparse.Namespace) -> int:
                          workers=args.workers, traffic=args.traffic, quiet=args.quiet, compare=args.compare,
                          agent_timeout=timeout,
                          replace_agents=_split_list(args.replace_agent, "--replace-agent"),
+                         guards=_split_list(args.guard, "--guard"),
                          **({"agents": agents} if agents else {}))
     doc = run_attack(opts)
     if not args.quiet:
@@ -508,6 +509,8 @@ def build_parser() -> argparse.ArgumentParser:
     at.add_argument("--replace-agent", action="append", metavar="NAME",
                     help="the out folder holds episodes of another agent of this name (other code or "
                     "checkpoint): delete them and run this one (repeatable)")
+    at.add_argument("--guard", action="append", metavar="NAME",
+                    help="also attack every agent behind this instruction guard (as evaluate's; repeatable)")
     at.set_defaults(func=_cmd_attack)
 
     sh = sub.add_parser(

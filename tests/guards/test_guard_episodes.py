@@ -97,3 +97,15 @@ def test_a_failing_guard_crashes_its_episodes_with_the_reason(tmp_path, guard, m
         crashed = [r for r in store.records() if r.status == "crashed"]
     assert res.crashed == 2 and {r.agent for r in crashed} == {f"instruction-follower+guard:{guard.name}"}
     assert all(message in r.message for r in crashed)
+
+
+def test_attack_searches_behind_the_guard_too(tmp_path):
+    from icrsumo.attack import AttackOptions, run_attack
+
+    doc = run_attack(AttackOptions(out=tmp_path / "a", agents=("instruction-follower",), guards=("plan",),
+                                   routes=("tiny_000",), budget=2))
+    row = "instruction-follower+guard:plan"
+    assert set(doc["agents"]) == {"instruction-follower", row} and doc["agents"][row]["routes_searched"] == 1
+    with ResultStore(tmp_path / "a" / "results.sqlite") as store:
+        log = store.episode_log(row, "tiny_000", "attack", 1, 2026)
+    assert log.guard and log.agent == row
