@@ -262,6 +262,15 @@ def _cmd_list(args: argparse.Namespace) -> int:
         for name, dist, why in REGISTRY.skipped_plugins:
             print(f"icrsumo: note: the agent {name!r} of the plugin {dist} is not registered: {why}",
                   file=sys.stderr)
+    elif args.what == "guards":
+        from .guards.registry import GUARDS
+
+        for name in GUARDS:
+            print(f"{name:22} {GUARDS.entry(name).description}")
+        print(f"{'llm:MODEL@URL':22} asks a language model whether the instruction conflicts with the plan")
+        for name, dist, why in GUARDS.skipped_plugins:
+            print(f"icrsumo: note: the guard {name!r} of the plugin {dist} is not registered: {why}",
+                  file=sys.stderr)
     else:
         for fam in ALL_FAMILIES:
             kind = "default" if fam in FAMILIES else "control" if fam in CONTROL_FAMILIES else ""
@@ -529,10 +538,11 @@ def build_parser() -> argparse.ArgumentParser:
     sh.add_argument("--dir", help="where to write the video and the still (default OUT/show/...)")
     sh.set_defaults(func=_cmd_show)
 
-    ls = sub.add_parser("list", help="what exists: bundled suites, a suite's routes, agents, families",
+    ls = sub.add_parser("list", help="what exists: suites, a suite's routes, agents, guards, families",
                         description="Print the bundled suites (name, coordinate frame, file), the routes of "
-                        "a suite (--suite), the registered agents (the default marked) or the families.")
-    ls.add_argument("what", choices=["suites", "routes", "agents", "families"])
+                        "a suite (--suite), the registered agents (the default marked), the instruction "
+                        "guards or the families.")
+    ls.add_argument("what", choices=["suites", "routes", "agents", "guards", "families"])
     ls.add_argument("--suite", default="tiny", help="the suite whose routes to list (default tiny)")
     ls.set_defaults(func=_cmd_list)
 

@@ -21,6 +21,9 @@ def test_suites_agents_and_families_come_from_the_registries(capsys):
     assert [ln.split()[0] for ln in agents] == list(REGISTRY)
     assert [ln.split()[0] for ln in agents if ln.endswith("(default)")] == [DEFAULT_AGENT]
     assert [ln.split()[0] for ln in _lines(capsys, "families")] == [f.value for f in ALL_FAMILIES]
+    from icrsumo.guards.registry import GUARDS
+
+    assert [ln.split()[0] for ln in _lines(capsys, "guards")] == [*GUARDS, "llm:MODEL@URL"]
 
 
 def test_routes_of_a_suite(capsys):

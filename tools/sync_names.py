@@ -20,6 +20,7 @@ END = "<!-- names:end -->"
 def block() -> str:
     """The block's Markdown, from the installed package's registries."""
     from icrsumo.agents.registry import DEFAULT_AGENT, REGISTRY
+    from icrsumo.guards.registry import GUARDS
     from icrsumo.resources import bundled_suites, suite_coords
     from icrsumo.vocab import CONTROL_FAMILIES, FAMILIES, FAMILY_DESCRIPTIONS
 
@@ -34,6 +35,10 @@ def block() -> str:
     lines.append("- **Control families**:")
     lines += [f"  - `{f.value}` — {FAMILY_DESCRIPTIONS[f].removeprefix('control: ')}"
               for f in CONTROL_FAMILIES]
+    lines.append("- **Instruction guards** (`--guard`):")
+    lines += [f"  - `{n}` — {GUARDS.entry(n).description}" for n in GUARDS]
+    lines.append("  - `llm:MODEL@URL` — asks a language model whether the instruction conflicts with "
+                 "the plan")
     return "\n".join(lines)
 
 
