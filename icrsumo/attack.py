@@ -43,7 +43,7 @@ from .evaluation.run import (
     run_queue,
     with_factories,
 )
-from .fsio import dumps_json, read_json, write_atomic
+from .fsio import FolderLock, dumps_json, read_json, write_atomic
 from .instructions.banks import load_banks
 from .instructions.rewrites import rewrite_pool
 from .instructions.store import read_route_file, route_document
@@ -181,6 +181,12 @@ def run_attack(opts: AttackOptions) -> dict:
     guards = resolve_guards(opts.guards)
     ids = identify_agents(factories, opts.replace_agents, guards)
     eopts = replace(eopts, agents=ids.specs)
+    out = Path(opts.out)
+    with FolderLock(out):
+        return _attack_locked(opts, eopts, factories, guards, ids)
+
+
+def _attack_locked(opts: AttackOptions, eopts: EvalOptions, factories: dict, guards: dict, ids) -> dict:
     names = dict(ids.names)
     out = Path(opts.out)
     check_agents(out / "results.sqlite", ids, opts.replace_agents)

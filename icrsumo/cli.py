@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import NoReturn
@@ -639,6 +641,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _stop_on_signals() -> dict:
+    """SIGTERM and SIGHUP stop a command as Ctrl-C does (:class:`icrsumo.errors.Stopped`:
+    workers stopped, finished episodes stored, exit 128 + signal); the previous handlers."""
+    from .errors import raise_stopped
+
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            if signal.getsignal(sig) is signal.SIG_DFL:  # not one the caller (or nohup) set
+                old[sig] = signal.signal(sig, raise_stopped)
+    return old
+
+
 #: subcommands whose --out is a folder they write (checked before they start)
 _WRITES_OUT = ("convert-routes", "generate", "evaluate", "attack", "collect", "train")
 
@@ -651,6 +666,7 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as done:  # --help, --version, or a one-line usage error (status 2)
         return int(done.code or 0)
+    old = _stop_on_signals()
     try:
         if args.command in _WRITES_OUT:
             from .fsio import check_out_dir
@@ -664,9 +680,12 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"icrsumo: error: {err.line()}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("icrsumo: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM / SIGHUP (errors.Stopped)
+        signum = getattr(err, "signum", signal.SIGINT)
+        what = "interrupted" if signum == signal.SIGINT else f"stopped by {signal.Signals(signum).name}"
+        print(f"icrsumo: {what} (every finished episode is stored; run the same command to resume)",
+              file=sys.stderr)
+        return 128 + int(signum)
     except OSError as err:  # a file the command reads or writes, named by the system
         if args.debug:
             raise
@@ -684,6 +703,9 @@ def main(argv: list[str] | None = None) -> int:
               f"named in the command; rerun with --debug for the traceback and report it if the input "
               f"is right)", file=sys.stderr)
         return 2
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
 
 
 if __name__ == "__main__":

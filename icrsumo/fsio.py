@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -150,15 +151,68 @@ class OutFolder:
     def before(cls, path: Path) -> OutFolder:
         path = Path(path)
         fresh = not path.exists()
-        return cls(path, fresh, not fresh and path.is_dir() and not any(path.iterdir()))
+        empty = not fresh and path.is_dir() and all(p.name == LOCK_NAME for p in path.iterdir())
+        return cls(path, fresh, empty)
 
     def undo(self) -> None:
-        """Remove a folder that was absent; empty one that was empty (the user's: kept)."""
+        """Remove a folder that was absent; empty one that was empty (the user's: kept), the
+        run's lock file (:class:`FolderLock`) aside."""
         if self.fresh:
             shutil.rmtree(self.path, ignore_errors=True)
         elif self.empty:
             for child in self.path.iterdir():
+                if child.name == LOCK_NAME:
+                    continue
                 shutil.rmtree(child, ignore_errors=True) if child.is_dir() else child.unlink(missing_ok=True)
+
+
+#: the lock file of an out folder while a run owns it
+LOCK_NAME = ".icrsumo.lock"
+
+
+class FolderLock:
+    """One run owns an out folder: an exclusive ``flock`` on ``OUT/.icrsumo.lock`` (holding the
+    owner's pid), taken before the folder's configuration is checked and held until the run
+    ends; the system releases it when the process dies, however it dies. A second run on the
+    folder meanwhile is an InputError naming the owner's pid. The folder is made when missing;
+    on leaving, the lock file goes, and so does a folder this lock made that is then empty (a
+    refused run leaves nothing behind)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self._fd: int | None = None
+        self._made = False
+
+    def __enter__(self) -> FolderLock:
+        import fcntl
+
+        from .errors import InputError
+
+        self._made = not self.path.exists()
+        self.path.mkdir(parents=True, exist_ok=True)
+        lock = self.path / LOCK_NAME
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            owner = os.read(fd, 32).decode("ascii", "replace").strip() or "?"
+            os.close(fd)
+            raise InputError(self.path, "", f"another icrsumo run (pid {owner}) is using this folder",
+                             "wait for it to end, or use another --out folder") from None
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode("ascii"))
+        self._fd = fd
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._fd is None:
+            return
+        (self.path / LOCK_NAME).unlink(missing_ok=True)  # while still held: no one else has it
+        os.close(self._fd)                                # releases the lock
+        self._fd = None
+        if self._made:
+            with contextlib.suppress(OSError):
+                self.path.rmdir()                         # only when empty
 
 
 def write_atomic(path: Path, data: str | bytes) -> None:

@@ -18,7 +18,7 @@ from ..agents.registry import (
     python_agent,
 )
 from ..errors import InputError, check_seed, expect
-from ..fsio import read_json
+from ..fsio import FolderLock, read_json
 from ..guards.base import guarded_name
 from ..instructions.families import ALL_FAMILIES, FAMILIES
 from ..metrics import SCORINGS, score_episode, scoring_names
@@ -208,12 +208,19 @@ def claim_agents(store: ResultStore, ids: AgentIds, replacing: tuple[str, ...]) 
 
 def run_evaluation(opts: EvalOptions) -> EvalResult:
     """Run (or resume) an evaluation and write its reports. Everything is checked before anything
-    is written (options, agents, the out folder's configuration and store, the suite)."""
+    is written (options, agents, the out folder's configuration and store, the suite); the run
+    owns the out folder while it runs (:class:`icrsumo.fsio.FolderLock`)."""
     opts.check()
     factories = resolve_agents(opts.agents)
     guards = resolve_guards(opts.guards)
     ids = identify_agents(factories, opts.replace_agents, guards)
     opts = replace(opts, agents=ids.specs)
+    with FolderLock(Path(opts.out)):
+        return _run_locked(opts, factories, guards, ids)
+
+
+def _run_locked(opts: EvalOptions, factories: dict[str, Callable], guards: dict[str, Callable],
+                ids: AgentIds) -> EvalResult:
     names = ids.names
     out = Path(opts.out)
     check_agents(out / "results.sqlite", ids, opts.replace_agents)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import multiprocessing
 import multiprocessing.connection
+import os
 import signal
 import threading
 import time
@@ -13,15 +14,19 @@ from collections.abc import Iterator
 from typing import Any
 
 from ...agents.watch import SlotWatch, Unwatched, overran, timeout_message
-from ...errors import raise_interrupted
+from ...errors import die_with_parent, raise_interrupted
 from ...vocab import ErrorKind
 from ..execute import EpisodeWorker, Outcome
 from ..plan import Job
 
 
-def _worker_main(conn: multiprocessing.connection.Connection, slot: Any) -> None:
-    """A pool worker: run the jobs it is sent, one at a time, until it is sent None."""
+def _worker_main(conn: multiprocessing.connection.Connection, slot: Any, parent: int) -> None:
+    """A pool worker: run the jobs it is sent, one at a time, until it is sent None; it dies
+    with its parent (however the parent ends, kill -9 included)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    for sig in (signal.SIGTERM, signal.SIGHUP):   # the parent's handlers, inherited by fork
+        signal.signal(sig, signal.SIG_DFL)
+    die_with_parent(parent)
     worker = EpisodeWorker(SlotWatch(slot))
     try:
         while True:
@@ -42,7 +47,7 @@ class _Process:
     def __init__(self, ctx: Any) -> None:
         self.slot = ctx.Value("d", 0.0, lock=False)
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_worker_main, args=(child, self.slot), daemon=True)
+        self.proc = ctx.Process(target=_worker_main, args=(child, self.slot, os.getpid()), daemon=True)
         self.proc.start()
         child.close()
         self.job: Job | None = None
