@@ -415,6 +415,8 @@ def _document(
 def attack_table(doc: dict) -> str:
     """Markdown: per agent the success rate, median queries, worst ΔDS (and the fixed grid's),
     then the transfer table."""
+    from .report import md_cell
+
     md = [
         f"Attack on {doc['suite']} (constraint {doc['constraint']}, budget {doc['budget']} per route, "
         f"seed {doc['seed']})",
@@ -438,8 +440,8 @@ def attack_table(doc: dict) -> str:
         med = "—" if a["median_queries"] is None else f"{a['median_queries']:g}"
         beyond = "—" if a["broken_not_by_grid"] is None else str(len(a["broken_not_by_grid"]))
         md.append(
-            f"| {agent} | {a['routes_searched']} | {a['successes']} | {rate} | {med} | {worst} | {grid} | "
-            f"{beyond} |"
+            f"| {md_cell(agent)} | {a['routes_searched']} | {a['successes']} | {rate} | {med} | {worst} | "
+            f"{grid} | {beyond} |"
         )
     if doc["transfer"]:
         md += [
@@ -449,10 +451,10 @@ def attack_table(doc: dict) -> str:
             "",
         ]
         cols = sorted({c for row in doc["transfer"].values() for c in row})
-        md += ["| found for | " + " | ".join(cols) + " |", "|---|" + "---:|" * len(cols)]
+        md += ["| found for | " + " | ".join(md_cell(c) for c in cols) + " |", "|---|" + "---:|" * len(cols)]
         for src, row in doc["transfer"].items():
             md.append(
-                f"| {src} | "
+                f"| {md_cell(src)} | "
                 + " | ".join(
                     "—" if c not in row else f"{100 * row[c]['success_rate']:.0f} % of {row[c]['routes']}"
                     for c in cols

@@ -4,11 +4,13 @@ checkpoint files. The only module that uses matplotlib (imported lazily, Agg, no
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import math
 import re
+import sys
 import textwrap
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -97,7 +99,7 @@ _TEX_SPECIAL = {"\\": r"\textbackslash{}", "~": r"\textasciitilde{}", "^": r"\^{
                 **{c: "\\" + c for c in "&%$#_{}"}}
 
 
-def _md_cell(s: str) -> str:
+def md_cell(s: str) -> str:
     """``s`` safe in a Markdown table cell: one line, ``|`` escaped."""
     return " ".join(str(s).split()).replace("|", "\\|")
 
@@ -111,12 +113,29 @@ def _tex_num(cell: str) -> str:
     return cell.replace("−", "-").replace("-", "$-$").replace("—", "--")
 
 
+#: first characters that make a spreadsheet read a CSV cell as a formula
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_cell(v: Any) -> Any:
+    """A CSV value that a spreadsheet never runs: a text starting with = + - @ (or a tab or
+    carriage return) that is not a number gets a leading apostrophe; None is empty."""
+    if v is None:
+        return ""
+    if isinstance(v, str) and v.startswith(_FORMULA_START):
+        try:
+            float(v)
+        except ValueError:
+            return "'" + v
+    return v
+
+
 def _csv_text(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(header)
     for row in rows:
-        w.writerow(["" if v is None else v for v in row])
+        w.writerow([csv_cell(v) for v in row])
     return buf.getvalue()
 
 
@@ -138,7 +157,7 @@ def tables(summary: dict) -> dict[str, str]:
     header, text_rows = table_cells(summary)
     md = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * 2 + ["---:"] * (len(header) - 2)) + "|"]
     for agent, fam, cells in text_rows:
-        md.append("| " + " | ".join([agent, fam, *cells]) + " |")
+        md.append("| " + " | ".join([md_cell(agent), fam, *cells]) + " |")
     note = crash_note(summary)
     if note:
         md += ["", note]
@@ -226,7 +245,7 @@ def attribution_table(summary: dict, doc: dict, top: int = 20) -> str:
                 continue
             comp = None if b.get("compliance") is None else 100.0 * b["compliance"]
             adh = None if b.get("adherence") is None else 100.0 * b["adherence"]
-            md.append("| " + " | ".join([agent, fam, *(str(d[o]) for o in _OUTCOMES), _num(comp, 1),
+            md.append("| " + " | ".join([md_cell(agent), fam, *(str(d[o]) for o in _OUTCOMES), _num(comp, 1),
                                          _num(adh, 1)]) + " |")
     md += ["", f"Flips (a variant failed where its baseline completed): {len(doc['flips'])}. "
                f"Templates and noise operations active at the decision where the ego left the route "
@@ -234,9 +253,8 @@ def attribution_table(summary: dict, doc: dict, top: int = 20) -> str:
            "| Family | Template | flips | uses | flip rate % | example |", "|---|---|---:|---:|---:|---|"]
     for r in doc["templates"][:top]:
         rate = None if r["flip_rate"] is None else 100.0 * r["flip_rate"]
-        example = r["example"].replace("|", "/")
-        md.append(f"| {r['family']} | {r['template']} | {r['flips']} | {r['uses']} | {_num(rate, 1)} | "
-                  f"{example} |")
+        md.append(f"| {r['family']} | {md_cell(r['template'])} | {r['flips']} | {r['uses']} | "
+                  f"{_num(rate, 1)} | {md_cell(r['example'])} |")
     md += ["", "Every flip: the decision where the ego left the route and the instruction active there.",
            "", "| Agent | Route | Family | k | ended | decision | route wanted | driven | instruction | "
            "template |",
@@ -247,11 +265,25 @@ def attribution_table(summary: dict, doc: dict, top: int = 20) -> str:
         cells = [f["agent"], f["route_id"], f["family"], str(f["k"]), f["termination"], where,
                  d.get("route_intent", "—"), d.get("executed") or d.get("outcome", "—"),
                  ins.get("text", "—"), ins.get("template", "—")]
-        md.append("| " + " | ".join(str(c).replace("|", "/") for c in cells) + " |")
+        md.append("| " + " | ".join(md_cell(c) for c in cells) + " |")
     return "\n".join(md) + "\n"
 
 
 # --------------------------------------------------------------------------- figures
+def plain_text(draw: Callable[..., None]) -> Callable[..., None]:
+    """Draw a figure with mathtext off: names and texts in it are data, so a "$" in an agent
+    name or an instruction is a dollar sign, never the start of a formula that fails to parse."""
+    @functools.wraps(draw)
+    def wrapped(*args: Any, **kwargs: Any) -> None:
+        import matplotlib
+
+        with matplotlib.rc_context({"text.parse_math": False}):
+            draw(*args, **kwargs)
+
+    return wrapped
+
+
+@plain_text
 def confusion_heatmaps(summary: dict, agent: str, path: Path) -> None:
     """One heatmap per family (baseline first) of ``agent``: instructed intent (rows) x executed
     branch (columns), counts of reached decisions."""
@@ -280,6 +312,7 @@ def confusion_heatmaps(summary: dict, agent: str, path: Path) -> None:
     _save(fig, path)
 
 
+@plain_text
 def template_flip_bars(doc: dict, path: Path, top: int = 15) -> None:
     """Bars of the ``top`` templates by flips, labelled with their flip rate."""
     rows = doc["templates"][:top]
@@ -328,6 +361,7 @@ def _agent_colours(agents: Sequence[str]) -> dict[str, Any]:
     return {a: cmap(i % 10) for i, a in enumerate(agents)}
 
 
+@plain_text
 def rd_to_plane(summary: dict, path: Path) -> None:
     """Scatter of the failure split: x = TO share, y = RD share (% of episodes), one point per
     (agent, family): colour = agent, marker = family (baseline hollow), both in legends (points
@@ -370,6 +404,7 @@ def rd_to_plane(summary: dict, path: Path) -> None:
     _save(fig, path)
 
 
+@plain_text
 def delta_bars(summary: dict, path: Path) -> None:
     """Two panels (ΔDS, ΔRC): per family, one bar per agent with its 95 % bootstrap CI."""
     agents = list(summary["agents"])
@@ -412,6 +447,7 @@ _DRAWN_EVENTS = (EventKind.COLLISION_PEDESTRIAN, EventKind.COLLISION_VEHICLE, Ev
                  EventKind.RED_LIGHT, EventKind.STOP_SIGN)
 
 
+@plain_text
 def paired_rollout(net, baseline_log: EpisodeLog, variant_logs: list[tuple[str, EpisodeLog, str]],
                    baseline_text: str, path: Path, title: str = "") -> None:
     """The map's lanes around the trajectories (bounding box + 30 m), the route, the baseline
@@ -739,6 +775,20 @@ def _file_name(s: str) -> str:
     return name if name not in ("", ".", "..") else f"x_{name}"
 
 
+def figure_or_note(draw: Any, *args: Any) -> None:
+    """``draw(*args)`` (the last argument is the figure's path); a figure that fails is a note
+    on stderr naming it, never the end of a run whose numbers are all in the tables. A full
+    disk or a missing folder still raises (the tables would fail the same way)."""
+    try:
+        draw(*args)
+    except OSError:
+        raise
+    except Exception as err:  # noqa: BLE001 - matplotlib's many ways to fail on odd text
+        print(f"icrsumo: note: no figure {Path(args[-1]).name}: {type(err).__name__}: "
+              f"{' '.join(str(err).split())[:160]}", file=sys.stderr)
+
+
+@plain_text
 def guard_tradeoff(doc: dict, path: Path) -> None:
     """Detection (misleading instructions blocked, %) against false blocks (baseline, paraphrase
     and noise instructions blocked, %), one point per guard (pooled over its rows), labelled."""
@@ -767,8 +817,8 @@ def write_guard(doc: dict, out_dir: Path) -> None:
 
     out = Path(out_dir)
     write_atomic(out / "guard.json", dumps_json(doc))
-    write_atomic(out / "guard.md", guard_markdown(doc, _md_cell))
-    guard_tradeoff(doc, out / "figures" / "guard_tradeoff.png")
+    write_atomic(out / "guard.md", guard_markdown(doc, md_cell))
+    figure_or_note(guard_tradeoff, doc, out / "figures" / "guard_tradeoff.png")
 
 
 def write_attribution(summary: dict, doc: dict, out_dir: Path) -> None:
@@ -778,8 +828,9 @@ def write_attribution(summary: dict, doc: dict, out_dir: Path) -> None:
     write_atomic(out / "attribution.json", dumps_json(doc))
     write_atomic(out / "attribution.md", attribution_table(summary, doc))
     for agent in summary["agents"]:
-        confusion_heatmaps(summary, agent, out / "figures" / f"confusion_{_file_name(agent)}.png")
-    template_flip_bars(doc, out / "figures" / "template_flips.png")
+        path = out / "figures" / f"confusion_{_file_name(agent)}.png"
+        figure_or_note(confusion_heatmaps, summary, agent, path)
+    figure_or_note(template_flip_bars, doc, out / "figures" / "template_flips.png")
 
 
 def write_report(summary: dict, records: Sequence[EpisodeRecord], out_dir: Path,
@@ -800,8 +851,8 @@ def write_report(summary: dict, records: Sequence[EpisodeRecord], out_dir: Path,
     rows = episode_table(records, ends)
     write_atomic(out / "episodes.csv", _csv_text(EPISODE_COLUMNS, ([row[c] for c in EPISODE_COLUMNS]
                                                                     for row in rows)))
-    rd_to_plane(summary, out / "figures" / "rd_to.png")
-    delta_bars(summary, out / "figures" / "delta_bars.png")
+    figure_or_note(rd_to_plane, summary, out / "figures" / "rd_to.png")
+    figure_or_note(delta_bars, summary, out / "figures" / "delta_bars.png")
     fams = [BASELINE] + list(summary.get("families") or [])
     checkpoint = LEADERBOARD_FILES[summary.get("scoring", "lb1")]
     for agent in summary["agents"]:

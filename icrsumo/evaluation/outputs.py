@@ -16,13 +16,15 @@ from .options import EvalOptions
 
 
 def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: list[EpisodeRecord],
-                  scenarios: Path, instr_dir: Path, not_shown: int = 0, rescored_short: int = 0) -> dict:
+                  scenarios: Path, instr_dir: Path, not_shown: int = 0, rescored_short: int = 0,
+                  not_shown_why: str = "") -> dict:
     """Write summary.json, tables and figures of ``records`` into ``out`` (the table is printed
     unless ``opts.quiet``); returns the summary. ``rescored_short``: rescored episodes that
     ended before the report's scoring would have ended them (counted in the summary,
     ``episodes.rescored_short``, and named on stderr). ``not_shown``: episodes in the store that are
     not of this evaluation (other agents, routes, families or k), counted in the summary
-    (``episodes.stored_not_in_report``) and named on stderr, never dropped silently."""
+    (``episodes.stored_not_in_report``, with ``not_shown_why`` or a default reason as
+    ``stored_not_in_report_why``) and named on stderr, never dropped silently."""
     from ..aggregate import summarize
     from ..attribution import attach
     from ..guards.measure import guard_doc, text_holdout
@@ -42,8 +44,10 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
               f"(run them with --scoring {opts.scoring} for the full episodes)", file=sys.stderr)
     if not_shown:
         summary["episodes"]["stored_not_in_report"] = not_shown
-        print(f"icrsumo: note: {not_shown} stored episodes of other agents, routes, families or k are "
-              f"not in this report (icrsumo report {out} shows all)", file=sys.stderr)
+        why = not_shown_why or (f"they are of other agents, routes, families or k (icrsumo report {out} "
+                                f"shows all)")
+        summary["episodes"]["stored_not_in_report_why"] = why
+        print(f"icrsumo: note: {not_shown} stored episodes are not in this report: {why}", file=sys.stderr)
     table = write_report(summary, records, out, ends)
     write_attribution(summary, attribution, out)
     guards = guard_doc(summary, records)

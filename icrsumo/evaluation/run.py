@@ -340,12 +340,26 @@ def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> d
                              "leaderboard's own rules", "run them again into another --out folder")
         families = tuple(f for f in ALL_FAMILIES if any(r.family == f for r in records))
         agents = tuple(sorted({r.agent for r in records}))
+        # episodes the tables cannot hold (an attack's searches and transfers): counted and named
+        others = sorted({str(r.family) for r in records
+                         if r.family != "baseline" and r.family not in families})
         opts = EvalOptions(out=out, suite=cfg["suite"], agents=agents or (DEFAULT_AGENT,),
                            families=families or FAMILIES, k=int(cfg["k"]), seed=int(cfg["seed"]),
                            traffic=str(cfg.get("traffic", "normal")), quiet=quiet,
                            scoring=scoring or stored_scoring)
         return write_outputs(opts, out, store, records, out / "scenarios" if (out / "scenarios").is_dir()
-                             else Path(cfg["suite"]), out / "instructions", rescored_short=inexact)
+                             else Path(cfg["suite"]), out / "instructions", rescored_short=inexact,
+                             not_shown=sum(str(r.family) in others for r in records),
+                             not_shown_why=_not_in_tables(others))
+
+
+def _not_in_tables(families: list[str]) -> str:
+    """Why stored episodes of ``families`` (not the protocol's) are not in the tables."""
+    if not families:
+        return ""
+    attack = {"attack", "transfer"} & set(families)
+    where = " (the attack's own report: attack.json, attack.md)" if attack else ""
+    return f"they are of the families {', '.join(families)}, which the ICR tables do not hold{where}"
 
 
 def rescore(store: ResultStore, records: list[EpisodeRecord],

@@ -108,4 +108,11 @@ def test_attack_searches_behind_the_guard_too(tmp_path):
     assert set(doc["agents"]) == {"instruction-follower", row} and doc["agents"][row]["routes_searched"] == 1
     with ResultStore(tmp_path / "a" / "results.sqlite") as store:
         log = store.episode_log(row, "tiny_000", "attack", 1, 2026)
+        stored = len(store.records())
     assert log.guard and log.agent == row
+    # the report of an attack folder accounts for every stored episode, naming what its tables leave out
+    from icrsumo.evaluation.run import report_only
+
+    ep = report_only(tmp_path / "a", quiet=True)["episodes"]
+    assert ep["done"] + ep["crashed"] + ep["stored_not_in_report"] == stored
+    assert "attack, transfer" in ep["stored_not_in_report_why"]
