@@ -184,9 +184,12 @@ def test_a_folder_converted_by_an_earlier_icrsumo_is_not_resumed(reference, caps
         (ref_out / "config.json").write_bytes(raw)
 
 
-def test_ray_backend_gives_identical_results(reference, tmp_path):
+def test_ray_backend_gives_identical_results(reference, tmp_path, monkeypatch):
+    """... on a private local cluster of its own: a RAY_ADDRESS (or a leftover session file)
+    pointing at a cluster that is gone is not joined."""
     pytest.importorskip("ray")
     ref_out, _ = reference
+    monkeypatch.setenv("RAY_ADDRESS", "127.0.0.1:1")
     evaluate(_opts(tmp_path, backend="ray", workers=2))
     assert _records(tmp_path) == _records(ref_out)
     assert (tmp_path / "summary.json").read_bytes() == (ref_out / "summary.json").read_bytes()

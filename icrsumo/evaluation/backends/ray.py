@@ -43,7 +43,9 @@ def run_ray(jobs: list[Job], workers: int, address: str | None = None,
         if address:
             ray.init(address=address, include_dashboard=False, log_to_driver=False)
         else:
-            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+            # "local": always a private instance of our own, never a cluster that RAY_ADDRESS or a
+            # leftover session file of an earlier (killed) Ray run points at
+            ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False)
     actor_cls = ray.remote(num_cpus=1)(RayWorker)
     try:
         idle = [actor_cls.remote(timeout) for _ in range(min(workers, len(jobs)))]
