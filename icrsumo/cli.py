@@ -332,7 +332,8 @@ def _cmd_check_agent(args: argparse.Namespace) -> int:
 def _cmd_serve_agent(args: argparse.Namespace) -> int:
     from .agents.serve import serve
 
-    serve(args.spec, host=args.host, port=args.port, max_batch=args.max_batch, device=args.device)
+    serve(args.spec, host=args.host, port=args.port, max_batch=args.max_batch, device=args.device,
+          key_env=args.key_env)
     return 0
 
 
@@ -583,6 +584,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="address to bind (default 127.0.0.1; 0.0.0.0 exposes the agent to the network)")
     sa.add_argument("--max-batch", type=int, default=8, help="act requests per batch at most (default 8)")
     sa.add_argument("--device", help="where a learned agent runs: cpu (default), cuda, cuda:N or auto")
+    sa.add_argument("--key-env", metavar="VAR",
+                    help="require the shared key held by the environment variable VAR on every request "
+                    "(clients: remote:http://HOST:PORT?key_env=VAR); advised off 127.0.0.1")
     sa.set_defaults(func=_cmd_serve_agent)
 
     sl = sub.add_parser(

@@ -36,6 +36,8 @@ import base64
 import contextlib
 import http.client
 import json
+import os
+import re
 import socket
 import uuid
 import zlib
@@ -181,27 +183,47 @@ def message(**fields: Any) -> bytes:
 
 
 # --------------------------------------------------------------------------- client
-def parse_url(url: str) -> tuple[str, int, float]:
-    """(host, port, timeout s) of ``http://HOST:PORT[?timeout=S]``; InputError when malformed."""
+def parse_url(url: str) -> tuple[str, int, float, str | None]:
+    """(host, port, timeout s, shared key) of ``http://HOST:PORT[?timeout=S&key_env=VAR]``
+    (the key read from the environment variable VAR, for a server started with ``--key-env``);
+    InputError when malformed or when VAR is not set."""
     parts = urlsplit(url)
-    fix = "use remote:http://HOST:PORT, e.g. remote:http://127.0.0.1:8765 (?timeout=S optional)"
+    fix = "use remote:http://HOST:PORT, e.g. remote:http://127.0.0.1:8765 (?timeout=S&key_env=VAR optional)"
     if parts.scheme != "http" or not parts.hostname:
         raise InputError("--agent", f"remote:{url}", "not an http://HOST:PORT address", fix)
+    query = parse_qs(parts.query)
     try:
         port = parts.port or 80
-        timeout = float(parse_qs(parts.query).get("timeout", [DEFAULT_TIMEOUT])[0])
+        timeout = float(query.get("timeout", [DEFAULT_TIMEOUT])[0])
     except ValueError:
         raise InputError("--agent", f"remote:{url}", "bad port or timeout", fix) from None
     if not 0 < timeout < float("inf"):
         raise InputError("--agent", f"remote:{url}", "timeout must be a positive number of seconds", fix)
-    return parts.hostname, port, timeout
+    key = None
+    if "key_env" in query:
+        key = shared_key(query["key_env"][0], "--agent", f"remote:{url}")
+    return parts.hostname, port, timeout, key
+
+
+def shared_key(var: str, option: str, value: str) -> str:
+    """The shared key held by the environment variable ``var``; an InputError naming ``option``
+    when ``var`` is no variable name or is not set (the key itself never goes on a command line)."""
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", var or ""):
+        raise InputError(option, value, f"key_env {var!r} is not a variable name",
+                         "name the variable that holds the shared key, e.g. ICRSUMO_AGENT_KEY")
+    key = os.environ.get(var, "").strip()
+    if not key:
+        raise InputError(option, value, f"the shared key variable {var} is not set",
+                         f"export {var}=... (the same key on both sides) before starting")
+    return key
 
 
 class _Connection:
     """One keep-alive HTTP/1.1 connection; every failure becomes an AgentError / AgentTimeout."""
 
-    def __init__(self, url: str, host: str, port: int, timeout: float) -> None:
+    def __init__(self, url: str, host: str, port: int, timeout: float, key: str | None = None) -> None:
         self.url, self.host, self.port, self.timeout = url, host, port, timeout
+        self.key = key
         self.conn: http.client.HTTPConnection | None = None
 
     def close(self) -> None:
@@ -217,6 +239,8 @@ class _Connection:
                 self.conn.connect()
                 self.conn.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             headers = {"Content-Type": "application/json"} if body is not None else {}
+            if self.key is not None:
+                headers["Authorization"] = f"Bearer {self.key}"
             self.conn.request(method, path, body=body, headers=headers)
             resp = self.conn.getresponse()
             raw = resp.read()
@@ -252,9 +276,9 @@ class RemoteAgent:
     privileged = False
 
     def __init__(self, url: str, name: str, timeout: float = DEFAULT_TIMEOUT) -> None:
-        host, port, _ = parse_url(url)
+        host, port, _, key = parse_url(url)
         self.url, self.name = url, name
-        self._conn = _Connection(url, host, port, timeout)
+        self._conn = _Connection(url, host, port, timeout, key)
         self.session: str | None = None
 
     def reset(self, info: EpisodeInfo) -> None:
@@ -288,9 +312,9 @@ class RemoteFactory:
     privileged = False
 
     def __init__(self, url: str) -> None:
-        host, port, timeout = parse_url(url)
+        host, port, timeout, key = parse_url(url)
         self.url, self.timeout = url, timeout
-        conn = _Connection(url, host, port, min(timeout, 10.0))
+        conn = _Connection(url, host, port, min(timeout, 10.0), key)
         try:
             info = conn.request("GET", "/info")
         except AgentError as err:

@@ -15,6 +15,7 @@ out with "agent did not answer within N s".
 
 from __future__ import annotations
 
+import hmac
 import json
 import queue
 import signal
@@ -29,7 +30,7 @@ from ..errors import InputError
 from .batching import BatchingCore, Task
 from .identity import fingerprint
 from .registry import agent_factory, agent_name
-from .remote import PROTOCOL, ProtocolError, decode_info, decode_obs, encode_action, message
+from .remote import PROTOCOL, ProtocolError, decode_info, decode_obs, encode_action, message, shared_key
 
 #: largest request body (bytes) the server reads
 MAX_BODY = 64 << 20
@@ -40,13 +41,15 @@ class AgentServer(BatchingCore):
     ``device``: where a learned agent runs (cpu by default, cuda, cuda:N, auto)."""
 
     def __init__(self, spec: str, host: str = "127.0.0.1", port: int = 0, max_batch: int = 8,
-                 max_sessions: int = 256, device: str | None = None) -> None:
+                 max_sessions: int = 256, device: str | None = None, key: str | None = None) -> None:
         factory = agent_factory(spec, device)
         if getattr(factory, "privileged", False):
             raise InputError("serve-agent", spec, "is a privileged agent: it needs the simulator's World "
                              "view, which is not sent over the network", "serve a non-privileged agent")
         super().__init__(factory, max_batch, max_sessions, name=agent_name(spec, factory))
         self.spec = spec
+        #: the shared key every request must carry (``Authorization: Bearer KEY``; None: none)
+        self.key = key
         #: the served agent's identity (:mod:`icrsumo.agents.identity`), reported by ``GET /info``
         self.fingerprint = fingerprint(factory)
         self._queue: queue.Queue[Task | None] = queue.Queue()
@@ -132,12 +135,30 @@ class _Handler(BaseHTTPRequestHandler):
     def _error(self, status: int, text: str) -> None:
         self._send(status, message(error=text))
 
+    def _authorized(self) -> bool:
+        """Whether the request carries the server's shared key (always, without one); a 401
+        protocol answer otherwise."""
+        key = self.owner.key
+        if key is None:
+            return True
+        given = self.headers.get("Authorization", "")
+        if hmac.compare_digest(given.encode("utf-8", "replace"), f"Bearer {key}".encode()):
+            return True
+        self.close_connection = True
+        self._error(401, "this server requires its shared key: use remote:http://HOST:PORT?key_env=VAR with "
+                         "VAR holding the key it was started with (--key-env)")
+        return False
+
     def do_GET(self) -> None:  # noqa: N802 - http.server's naming
+        if not self._authorized():
+            return None
         if self.path.split("?")[0] != "/info":
             return self._error(404, f"no such endpoint GET {self.path} (use GET /info)")
         self._send(200, message(**self.owner.info()))
 
     def do_POST(self) -> None:  # noqa: N802
+        if not self._authorized():
+            return None
         path = self.path.split("?")[0]
         if path not in ("/reset", "/act", "/close"):
             return self._error(404, f"no such endpoint POST {self.path} (use /reset, /act, /close)")
@@ -149,7 +170,7 @@ class _Handler(BaseHTTPRequestHandler):
             self.close_connection = True
             return self._error(400, f"a body of 0 to {MAX_BODY} bytes with Content-Length is required")
         try:
-            doc = json.loads(self.rfile.read(length))
+            doc = json.loads(self.rfile.read(length), parse_constant=_no_constant)
             if not isinstance(doc, dict):
                 raise ProtocolError("the body must be a JSON object")
             if doc.get("protocol") != PROTOCOL:
@@ -160,8 +181,10 @@ class _Handler(BaseHTTPRequestHandler):
             kind = path[1:]
             payload = decode_info(doc.get("info")) if kind == "reset" else \
                 decode_obs(doc.get("obs")) if kind == "act" else None
-        except (ValueError, ProtocolError) as err:
-            return self._error(400, f"malformed request: {err}")
+        except (ValueError, ProtocolError, OverflowError, TypeError) as err:
+            return self._error(400, f"malformed request: {' '.join(str(err).split())[:200]}")
+        except RecursionError:
+            return self._error(400, "malformed request: JSON nested too deeply")
         task = self.owner.submit(Task(kind, session, payload))
         if task.status != 200:
             return self._error(task.status, task.error)
@@ -174,16 +197,33 @@ class _Handler(BaseHTTPRequestHandler):
         self._send(200, body)
 
 
+def _no_constant(name: str) -> float:
+    """JSON's non-standard NaN / Infinity are refused (a request with them is malformed)."""
+    raise ValueError(f"{name} is not a JSON number")
+
+
+#: hosts that only this machine reaches
+_LOOPBACK = ("127.0.0.1", "localhost", "::1")
+
+
 def serve(spec: str, host: str = "127.0.0.1", port: int = 8765, max_batch: int = 8,
-          device: str | None = None) -> None:
-    """Serve ``spec`` (on ``device``) until interrupted (the ``icrsumo serve-agent`` command)."""
+          device: str | None = None, key_env: str | None = None) -> None:
+    """Serve ``spec`` (on ``device``) until interrupted (the ``icrsumo serve-agent`` command).
+    ``key_env``: the environment variable holding a shared key every request must carry; a
+    server on another host than the loopback without one says that it has no authentication."""
     if not isinstance(port, int) or not 0 <= port <= 65535:
         raise InputError("--port", str(port), "out of range", "use 0 to 65535 (0: any free port)")
     if max_batch < 1:
         raise InputError("--max-batch", str(max_batch), "must be at least 1", "give a positive count")
     if device is not None:
         check_device(device)
-    server = AgentServer(spec, host, port, max_batch, device=device)
+    key = shared_key(key_env, "--key-env", key_env) if key_env is not None else None
+    server = AgentServer(spec, host, port, max_batch, device=device, key=key)
+    if key is None and host not in _LOOPBACK and not host.startswith("127."):
+        print(f"icrsumo: warning: serving on {host}: every machine that can reach port {server.port} can "
+              f"drive this agent and read its answers (the server has no authentication); start it with "
+              f"--key-env VAR (a shared key in VAR) and give clients remote:URL?key_env=VAR",
+              file=sys.stderr, flush=True)
     print(f"icrsumo: serving agent {server.name!r} ({spec}) on {server.url} (protocol {PROTOCOL}, "
           f"{'act_batch' if server.batch_hook else 'act per session'}, max batch {max_batch}); "
           f"Ctrl-C stops", file=sys.stderr, flush=True)

@@ -162,3 +162,79 @@ def test_concurrent_acts_are_batched_with_per_session_state():
         assert len(server.sessions) == 0
     finally:
         server.shutdown()
+
+
+class _Cruise:
+    name, privileged = "cruise-key", False
+
+    def reset(self, info):
+        pass
+
+    def act(self, obs):
+        return Action(waypoints=np.array([[2.5, 0.0]]), target_speed=3.0)
+
+
+def _post(url: str, path: str, body: bytes, headers: dict | None = None) -> tuple[int, dict]:
+    import http.client
+    from urllib.parse import urlsplit
+
+    u = urlsplit(url)
+    conn = http.client.HTTPConnection(u.hostname, u.port, timeout=10)
+    conn.request("POST", path, body=body, headers={"Content-Type": "application/json", **(headers or {})})
+    resp = conn.getresponse()
+    status, doc = resp.status, json.loads(resp.read())
+    conn.close()
+    return status, doc
+
+
+def test_a_shared_key_guards_the_server_and_hostile_json_is_a_400(monkeypatch, capsys):
+    from icrsumo.agents.remote import RemoteFactory
+    from icrsumo.agents.serve import AgentServer
+    from icrsumo.errors import InputError
+
+    register("cruise-key", _Cruise)
+    try:
+        server = AgentServer("cruise-key", key="s3cret").start()
+    finally:
+        unregister("cruise-key")
+    try:
+        with pytest.raises(InputError, match="requires its shared key"):
+            RemoteFactory(server.url)
+        with pytest.raises(InputError, match="the shared key variable ICR_TEST_KEY is not set"):
+            RemoteFactory(server.url + "?key_env=ICR_TEST_KEY")
+        monkeypatch.setenv("ICR_TEST_KEY", "wrong")
+        with pytest.raises(InputError, match="requires its shared key"):
+            RemoteFactory(server.url + "?key_env=ICR_TEST_KEY")
+        monkeypatch.setenv("ICR_TEST_KEY", "s3cret")
+        agent = RemoteFactory(server.url + "?key_env=ICR_TEST_KEY")()
+        agent.reset(INFO)
+        assert agent.act(_obs()).target_speed == 3.0
+        agent.close()
+        auth = {"Authorization": "Bearer s3cret"}
+        nested = b"[" * 100000 + b"]" * 100000
+        deep = b'{"protocol": "' + PROTOCOL.encode() + b'", "session": "a", "info": ' + nested + b"}"
+        status, doc = _post(server.url, "/reset", deep, auth)
+        assert status == 400 and "nested too deeply" in doc["error"]
+        inf = json.dumps({"protocol": PROTOCOL, "session": "a", "info": {**json.loads(json.dumps(
+            {"route_id": "r", "town": "t", "net": "n", "step_length": 0.05, "control_dt": 0.1}))}}).encode()
+        inf = inf[:-2] + b', "seed": Infinity}}'
+        status, doc = _post(server.url, "/reset", inf, auth)
+        assert status == 400 and "Infinity is not a JSON number" in doc["error"]
+    finally:
+        server.shutdown()
+
+
+def test_serving_beyond_the_loopback_without_a_key_says_so(monkeypatch, capsys):
+    import icrsumo.agents.serve as serve_mod
+
+    monkeypatch.setattr(serve_mod.AgentServer, "serve_forever", lambda self: None)   # start, say, stop
+    monkeypatch.setattr(serve_mod.AgentServer, "shutdown", lambda self: self.httpd.server_close())
+    register("cruise-key", _Cruise)
+    try:
+        serve_mod.serve("cruise-key", host="0.0.0.0", port=0)
+        assert "has no authentication" in capsys.readouterr().err
+        monkeypatch.setenv("ICR_TEST_KEY", "k")
+        serve_mod.serve("cruise-key", host="0.0.0.0", port=0, key_env="ICR_TEST_KEY")
+        assert "no authentication" not in capsys.readouterr().err
+    finally:
+        unregister("cruise-key")
