@@ -56,7 +56,8 @@ _KEYWORDS = {"--agent": "agents", "--family": "families", "--replace-agent": "re
              "--inference-processes": "inference_processes", "--baseline-bank": "baseline_bank",
              "--retry-crashed": "retry_crashed", "--routes": "routes", "--workers": "workers",
              "--backend": "backend", "--address": "address", "--traffic": "traffic", "--scoring": "scoring",
-             "--suite": "suite", "--seed": "seed", "--out": "out", "--k": "k"}
+             "--suite": "suite", "--seed": "seed", "--out": "out", "--k": "k", "--guard": "guards",
+             "--quiet": "quiet"}
 _OPTION = re.compile("|".join(re.escape(o) for o in sorted(_KEYWORDS, key=len, reverse=True)) + r"(?![\w-])")
 
 

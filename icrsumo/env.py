@@ -86,6 +86,29 @@ def to_observation(obs: dict[str, Any], info: dict[str, Any]) -> Observation:
                        instruction_id=int(info["instruction_id"]), notice=text(obs["notice"]))
 
 
+
+#: the keys ``reset(options=...)`` reads
+RESET_OPTIONS = ("family", "k")
+
+
+def _reset_options(options: object) -> dict[str, Any]:
+    """``reset``'s options checked: None or a dict of :data:`RESET_OPTIONS` keys (a misspelt key
+    is an InputError, never a silent baseline)."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise InputError("options", type(options).__name__, "must be a dict (or None)",
+                         "give e.g. options={'family': 'misleading', 'k': 0}")
+    unknown = [k for k in options if k not in RESET_OPTIONS]
+    if unknown:
+        import difflib
+
+        near = difflib.get_close_matches(str(unknown[0]), RESET_OPTIONS, n=1)
+        hint = f"did you mean {near[0]!r}? " if near else ""
+        raise InputError("options", repr(unknown[0]), "unknown reset option",
+                         f"{hint}use {', '.join(RESET_OPTIONS)}")
+    return options
+
 class _Penalties(EpisodeCallback):
     """The penalised event infractions of an episode as they happen (``kinds``, in order): the
     collisions :class:`~icrsumo.metrics.CollisionCounter` counts (on the positions the log
@@ -186,6 +209,12 @@ class ICRDriveEnv(gym.Env):
 
     # ------------------------------------------------------------------ helpers
     def _set(self, family: str, k: int) -> InstructionSet:
+        if not isinstance(family, str):
+            raise InputError("options", "family", f"must be a family name, not {type(family).__name__}",
+                             "give e.g. options={'family': 'misleading', 'k': 0}")
+        if isinstance(k, bool) or not isinstance(k, int):
+            raise InputError("options", "k", f"must be an integer, not {k!r}"[:80],
+                             "give e.g. options={'k': 0}")
         key = (family, 0 if family == "baseline" else int(k))
         if key not in self.sets:
             have = ", ".join(f"{f}:{kk}" for f, kk in list(self.sets)[:6])
@@ -238,7 +267,7 @@ class ICRDriveEnv(gym.Env):
         """Start the episode (SUMO, warm-up, ego insertion); (observation, info)."""
         global _live
         super().reset(seed=seed)
-        options = options or {}
+        options = _reset_options(options)
         iset = self._set(options.get("family", self.family), options.get("k", self.k))
         self._close_episode()
         other = _live() if _live is not None else None

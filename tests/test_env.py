@@ -108,6 +108,14 @@ def test_reset_is_deterministic_and_options_pick_the_sequence(cache):
     assert (info["family"], info["k"]) == ("misleading", 3)
     with pytest.raises(AgentError, match="NaN"):
         env.step(np.array([np.nan, 0.0, 0.0], np.float32))
+    from icrsumo.errors import InputError
+
+    with pytest.raises(InputError, match="'famly': unknown reset option .*did you mean 'family'"):
+        env.reset(options={"famly": "misleading"})      # never a silent baseline
+    with pytest.raises(InputError, match="options: list: must be a dict"):
+        env.reset(options=["misleading"])
+    with pytest.raises(InputError, match="k: must be an integer, not '3'"):
+        env.reset(options={"family": "misleading", "k": "3"})
     env.close()
 
 

@@ -66,7 +66,9 @@ class EvalOptions:
     guards: tuple[str, ...] = ()
 
     def check(self) -> None:
-        """InputErrors for bad values (agent specs are checked when they are resolved)."""
+        """InputErrors for bad values (agent specs are checked when they are resolved); first
+        the types (the Python API passes any object: ``k='1'`` is named, not a TypeError)."""
+        self._check_types()
         bad = [f for f in self.families if f not in ALL_FAMILIES]
         if bad or not self.families:
             raise InputError("--family", bad[0] if bad else "", "unknown family",
@@ -111,3 +113,32 @@ class EvalOptions:
             raise InputError("--suite", self.suite, "unknown suite",
                              f"use {', '.join(bundled_suites())}, a route XML file or a "
                              "convert-routes folder")
+
+    def _check_types(self) -> None:
+        def option(name: str) -> str:
+            return "--" + name.replace("_", "-")
+
+        for name in ("k", "seed", "workers", "max_batch", "inference_processes"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise InputError(option(name), repr(v)[:40], f"must be an integer, not {type(v).__name__}",
+                                 "give a whole number")
+        for name in ("quiet", "retry_crashed"):
+            if not isinstance(getattr(self, name), bool):
+                raise InputError(option(name), repr(getattr(self, name))[:40], "must be True or False",
+                                 "give a bool")
+        for name in ("suite", "backend", "traffic", "scoring"):
+            v = getattr(self, name)
+            if not isinstance(v, str):
+                raise InputError(option(name), repr(v)[:40], f"must be a string, not {type(v).__name__}",
+                                 "give its name")
+        t = self.agent_timeout
+        if t is not None and (isinstance(t, bool) or not isinstance(t, (int, float))):
+            raise InputError("--agent-timeout", repr(t)[:40], "must be a number of seconds or None",
+                             "give e.g. 60, or None for no limit")
+        for name in ("families", "guards", "replace_agents"):
+            values = getattr(self, name)
+            if not isinstance(values, tuple) or not all(isinstance(v, str) for v in values):
+                raise InputError(option(name.rstrip("s")), repr(values)[:60], "must be names (strings)",
+                                 "give a name or a list of names")
+

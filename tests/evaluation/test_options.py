@@ -82,3 +82,19 @@ def test_progress_of_nothing_prints_nothing(capsys):
     with Progress(0, quiet=False):
         pass
     assert capsys.readouterr() == ("", "")
+
+
+@pytest.mark.parametrize(("kw", "line"), [
+    ({"k": "1"}, "k: '1': must be an integer, not str"),
+    ({"workers": "2"}, "workers: '2': must be an integer, not str"),
+    ({"seed": 1.5}, "seed: 1.5: must be an integer, not float"),
+    ({"quiet": "yes"}, "quiet: 'yes': must be True or False"),
+    ({"agent_timeout": "60"}, "agent_timeout: '60': must be a number of seconds or None"),
+])
+def test_the_python_api_names_a_value_of_the_wrong_type(tmp_path, kw, line):
+    import icrsumo
+    from icrsumo.errors import InputError
+
+    with pytest.raises(InputError) as err:
+        icrsumo.evaluate(out=tmp_path / "o", **kw)
+    assert line in str(err.value) and not (tmp_path / "o").exists()
