@@ -120,8 +120,11 @@ def _resolve_suite(opts: EvalOptions, out: Path) -> tuple[Path, list[str]]:
     routes = bundled_suites().get(opts.suite, p)
     target = out / "scenarios"
     coords = suite_coords(opts.suite) or "sumo"  # a bundled suite knows its frame (langauto-*: carla)
+    # a first run whose routes all fail names the first route's reason (a 300-character id, two
+    # ids that map to one folder), not the empty folder it would leave
     report = convert_routes(routes, target, ConvertOptions(coords=coords, traffic=opts.traffic,
-                                                           workers=opts.workers))
+                                                           workers=opts.workers),
+                            refuse_empty=not (out / "results.sqlite").exists())
     return target, list(report.failures)
 
 
