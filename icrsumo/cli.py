@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import signal
 import sys
@@ -693,6 +694,12 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as err:  # a file the command reads or writes, named by the system
         if args.debug:
             raise
+        if err.errno in (errno.ENOSPC, errno.EDQUOT):  # the disk, not the path, is the problem
+            where = err.filename or getattr(args, "out", None) or "(a file)"
+            print(f"icrsumo: error: {where}: no space left on the device (fix: free space on that disk and "
+                  f"run the same command again: what was stored so far is kept and the run resumes)",
+                  file=sys.stderr)
+            return 2
         # os.replace names its source (our temporary file) first and the destination second
         where = err.filename2 or err.filename or "(a file)"
         print(f"icrsumo: error: {where}: {err.strerror or err} (fix: check the path: a folder where a file "

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import os
 import sqlite3
 import zlib
 from collections.abc import Collection, Iterator, Mapping
@@ -34,6 +35,25 @@ CREATE TABLE IF NOT EXISTS episodes (
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 """
 
+
+
+#: bytes free under which an SQLite I/O error is taken as the disk being full
+_FULL_BELOW = 1 << 20
+
+
+def _disk_full(err: sqlite3.Error, path: Path) -> bool:
+    """Whether SQLite failed for want of space: SQLITE_FULL, or an I/O error while the disk that
+    holds ``path`` has less than 1 MiB free (SQLite reports a full disk either way)."""
+    code = getattr(err, "sqlite_errorcode", None)
+    if code == 13 or "disk is full" in str(err):
+        return True
+    if code is not None and code & 0xFF != 10 and "disk I/O error" not in str(err):
+        return False
+    try:
+        st = os.statvfs(Path(path).parent)
+    except OSError:
+        return False
+    return st.f_bavail * st.f_frsize < _FULL_BELOW
 
 class ResultStore:
     """Episode records (and compressed episode logs) keyed by (agent, route, family, k, seed)."""
@@ -75,12 +95,18 @@ class ResultStore:
 
     @contextlib.contextmanager
     def _guard(self, doing: str) -> Iterator[None]:
-        """SQLite's errors on a damaged file as one InputError naming the store."""
+        """SQLite's errors as one InputError naming the store: a full disk as such (the store is
+        healthy: never a fix that discards it), anything else as a damaged file."""
         try:
             yield
         except sqlite3.DatabaseError as err:
             with contextlib.suppress(sqlite3.Error):
                 self._db.close()
+            if _disk_full(err, self.path):
+                raise InputError(self.path, doing, "no space left on the disk that holds the results "
+                                 "store (the store and every episode in it are intact)",
+                                 "free space on that disk and run the same command again (it resumes)",
+                                 ) from None
             raise InputError(self.path, doing, f"the results store is damaged or not an icrsumo store "
                              f"({err})", "restore it from a copy, or move it away and rerun (its episodes "
                              "are then run again)") from None

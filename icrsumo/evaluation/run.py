@@ -275,6 +275,16 @@ def check_stored_routes(opts: EvalOptions, store: ResultStore, agents: set[str],
                          "tables from the store alone with icrsumo report OUT")
 
 
+def check_still_there(store: ResultStore) -> None:
+    """An InputError when the store's file (its out folder) is gone: a folder deleted during a
+    run fails its remaining episodes for want of their files, which is no agent's crash, and the
+    episodes stored meanwhile would go to a file nobody can open."""
+    if not store.path.exists():
+        raise InputError(store.path.parent, "", "the out folder (or its results store) was deleted while "
+                         "the run was going: the episodes stored in it are lost",
+                         "run again into a folder that stays")
+
+
 def run_queue(queue: list[Job], opts: EvalOptions, store: ResultStore, progress: Progress) -> None:
     """Run ``queue`` on the backend, storing each episode at once; an episode that crashed
     (:data:`RETRIED` kinds) is run again once, then stored as crashed; a timed-out one is stored
@@ -283,6 +293,7 @@ def run_queue(queue: list[Job], opts: EvalOptions, store: ResultStore, progress:
     while queue:
         retry = []
         for job, outcome in run_jobs(queue, opts):
+            check_still_there(store)
             n = attempts[job.key] = attempts.get(job.key, 0) + 1
             if outcome.status is OutcomeStatus.DONE:
                 store.put(replace(outcome.record, attempts=n), outcome.log_json)
