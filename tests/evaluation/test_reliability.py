@@ -274,7 +274,7 @@ def test_stored_episodes_outside_the_selection_are_counted(suite, tmp_path, caps
     run_evaluation(_opts(out, suite, agents=("route-oracle",)))
     summary = run_evaluation(_opts(out, suite, agents=("instruction-follower",))).summary
     assert summary["episodes"]["stored_not_in_report"] == 2
-    assert "2 stored episodes of other agents" in capsys.readouterr().err
+    assert "2 stored episodes are not in this report: they are of other agents" in capsys.readouterr().err
 
 
 @pytest.mark.sumo

@@ -18,8 +18,8 @@ import pytest
 
 pytestmark = pytest.mark.sumo
 
-ARGS = ["--agent", "instruction-follower", "--family", "paraphrase", "--k", "4", "--routes",
-        "tiny_000,tiny_001,tiny_002", "--workers", "2", "--quiet"]
+ARGS = ["--agent", "instruction-follower", "--family", "paraphrase", "--k", "3", "--routes",
+        "tiny_000,tiny_002", "--workers", "2", "--quiet"]
 
 
 def _start(out: Path, *extra: str) -> subprocess.Popen:

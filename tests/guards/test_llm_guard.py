@@ -68,8 +68,8 @@ def smollm2(tmp_path_factory):
 @pytest.mark.sumo
 def test_the_llm_guard_asks_the_model_and_replays_from_the_cache(smollm2, tmp_path):
     out = tmp_path / "a"
-    res = evaluate(agents="instruction-follower", guards=smollm2.spec(),
-                   families=["misleading", "paraphrase"], k=1, routes=ROUTES, out=out, workers=1)
+    res = evaluate(agents="instruction-follower", guards=smollm2.spec(), families="misleading", k=1,
+                   routes=ROUTES, out=out, workers=1)
     row = "instruction-follower+guard:llm:smollm2"
     assert res.crashed == 0 and row in res.summary["agents"]
     with ResultStore(out / "results.sqlite") as store:
@@ -83,8 +83,8 @@ def test_the_llm_guard_asks_the_model_and_replays_from_the_cache(smollm2, tmp_pa
     for part in ("scenarios", "instructions", "llm-cache"):
         shutil.copytree(out / part, again / part)
     dead = f"llm:smollm2@http://127.0.0.1:{free_port()}/v1"
-    res2 = evaluate(agents="instruction-follower", guards=dead, families=["misleading", "paraphrase"], k=1,
-                    routes=ROUTES, out=again, workers=2)
+    res2 = evaluate(agents="instruction-follower", guards=dead, families="misleading", k=1, routes=ROUTES,
+                    out=again, workers=2)
     assert res2.crashed == 0
     for name in ("summary.json", "guard.json"):
         assert (again / name).read_bytes() == (out / name).read_bytes(), name
