@@ -41,7 +41,7 @@ from multiprocessing.connection import Client, Connection, Listener, wait
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError, describe
+from ..errors import InputError, describe, die_with_parent
 from .base import AgentError, EpisodeInfo, Observation
 from .batching import TASK_KINDS, BatchingCore, Task
 from .registry import agent_factory, agent_name
@@ -139,7 +139,7 @@ def start_server(spec: str, device: str, max_batch: int = 32, key: bytes | None 
     address = str(Path(folder.name) / "agent.sock")
     ctx = multiprocessing.get_context("spawn")
     control, child = ctx.Pipe()
-    proc = ctx.Process(target=_serve, args=(spec, address, key, device, max_batch, child),
+    proc = ctx.Process(target=_serve, args=(spec, address, key, device, max_batch, child, os.getpid()),
                        name=f"icrsumo-batch-{name}", daemon=True)
     proc.start()
     child.close()
@@ -157,8 +157,12 @@ def start_server(spec: str, device: str, max_batch: int = 32, key: bytes | None 
     return BatchServer(name, address, key, proc, control, folder)
 
 
-def _serve(spec: str, address: str, key: bytes, device: str, max_batch: int, control: Connection) -> None:
-    """The inference process: load the agent, listen, answer batches until told to stop."""
+def _serve(spec: str, address: str, key: bytes, device: str, max_batch: int, control: Connection,
+           parent: int | None = None) -> None:
+    """The inference process: load the agent, listen, answer batches until told to stop; it
+    dies with the evaluating process (``parent``), however that ends."""
+    if parent is not None:
+        die_with_parent(parent)
     try:
         if device.startswith("cuda"):
             import torch

@@ -22,8 +22,8 @@ ARGS = ["--agent", "instruction-follower", "--family", "paraphrase", "--k", "3",
         "tiny_000,tiny_002", "--workers", "2", "--quiet"]
 
 
-def _start(out: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "icrsumo", "evaluate", *ARGS, *extra, "--out", str(out)],
+def _start(out: Path, *extra: str, args: list[str] = ARGS) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "icrsumo", "evaluate", *args, *extra, "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -43,12 +43,12 @@ def _stored(out: Path) -> int:
         return 0
 
 
-def _wait_running(p: subprocess.Popen, out: Path) -> list[int]:
+def _wait_running(p: subprocess.Popen, out: Path, processes: int = 2) -> list[int]:
     """Wait until the run has stored an episode and has its worker processes; their pids."""
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:
         kids = _children(p.pid)
-        if _stored(out) >= 1 and len(kids) >= 2:
+        if _stored(out) >= 1 and len(kids) >= processes:
             return kids
         assert p.poll() is None, p.stderr.read()
         time.sleep(0.2)
@@ -95,14 +95,20 @@ def test_a_signal_stops_the_run_and_its_workers_and_a_rerun_resumes(tmp_path, fr
     assert (out / "summary.json").read_bytes() == fresh
 
 
-def test_kill_9_of_the_main_process_takes_its_workers_with_it(tmp_path):
+BATCHED = ["--agent", "bev-ngram-aug", "--family", "paraphrase", "--k", "4", "--routes", "tiny_000,tiny_002",
+           "--workers", "2", "--batch-inference", "cpu", "--quiet"]
+
+
+@pytest.mark.parametrize("batched", [False, True])
+def test_kill_9_of_the_main_process_takes_its_workers_with_it(tmp_path, batched):
+    """... and its batched-inference process too."""
     out = tmp_path / "o"
-    p = _start(out)
-    workers = _wait_running(p, out)
+    p = _start(out, args=BATCHED if batched else ARGS)
+    workers = _wait_running(p, out, 3 if batched else 2)
     os.kill(p.pid, signal.SIGKILL)
     p.wait(timeout=30)
     assert _gone(workers), "worker processes outlived a killed run"
-    again = _start(out)                            # the system released the folder's lock
+    again = _start(out, args=BATCHED if batched else ARGS)   # the system released the folder's lock
     assert again.wait(timeout=300) == 0, again.stderr.read()
 
 
