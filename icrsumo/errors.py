@@ -94,36 +94,6 @@ def raise_stopped(signum: int, frame: object) -> None:
     raise Stopped(signum)
 
 
-def die_with_parent(parent: int) -> None:
-    """Make this (child) process die when its parent does: Linux's ``PR_SET_PDEATHSIG``
-    (SIGKILL), and an exit at once if ``parent`` is already gone; elsewhere a daemon thread that
-    exits the process once its parent pid changes."""
-    import os
-    import signal
-    import sys
-
-    if sys.platform.startswith("linux"):
-        import ctypes
-
-        try:
-            ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
-        except (OSError, AttributeError):
-            pass
-        else:
-            if os.getppid() != parent:
-                os._exit(1)
-            return
-    import threading
-    import time
-
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(1.0)
-        os._exit(1)
-
-    threading.Thread(target=watch, daemon=True, name="icrsumo-parent-watch").start()
-
-
 #: the largest seed: seeds are stored as SQLite integers and feed numpy's generators
 MAX_SEED = 2**63 - 1
 

