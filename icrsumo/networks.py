@@ -109,6 +109,8 @@ class RoadNet:
         )
         self.has_sidewalks = False
         self._cum_cache: dict[str, np.ndarray] = {}
+        self._via_min: dict[tuple[str, str], float] = {}
+        self._choice: dict[str, bool] = {}
         self._arms: dict[str, set[str]] = {}
         #: nodes with pedestrian crossings
         self.crossing_nodes: frozenset[str] = frozenset()
@@ -174,6 +176,7 @@ class RoadNet:
                 self.connections[(eid, tid)] = tuple(
                     sorted(clist, key=lambda c: (c.from_lane, c.to_lane))
                 )
+                self._via_min[(eid, tid)] = min(c.via_length for c in clist)
             self.successors[eid] = tuple(sorted(conns))
 
     def _build_segments(self) -> None:
@@ -202,6 +205,10 @@ class RoadNet:
                              "give a .net.xml written by netconvert")
         self._seg_lane = np.concatenate(lane_idx)
         self._seg_start = np.concatenate(start)
+        self._seg_ab = self._seg_b - self._seg_a
+        self._seg_ab2 = np.maximum((self._seg_ab * self._seg_ab).sum(axis=1), 1e-12)
+        self._seg_lo = np.minimum(self._seg_a, self._seg_b)
+        self._seg_hi = np.maximum(self._seg_a, self._seg_b)
 
     # ----------------------------------------------------------------- geometry
     def node_arms(self, node: str) -> int:
@@ -280,20 +287,24 @@ class RoadNet:
         """Passenger lanes within ``radius`` m of (x, y): (lane, pos m, distance m, heading rad),
         one entry per lane (its closest point), nearest first."""
         p = np.array([x, y])
-        ab = self._seg_b - self._seg_a
-        ab2 = np.maximum((ab * ab).sum(axis=1), 1e-12)
-        t = np.clip(((p - self._seg_a) * ab).sum(axis=1) / ab2, 0.0, 1.0)
-        closest = self._seg_a + ab * t[:, None]
+        # only the segments whose bounding box comes within the radius (a margin for rounding)
+        r = radius + 1e-6
+        lo, hi = self._seg_lo, self._seg_hi
+        box = np.nonzero((lo[:, 0] <= x + r) & (hi[:, 0] >= x - r)
+                         & (lo[:, 1] <= y + r) & (hi[:, 1] >= y - r))[0]
+        a, ab, ab2 = self._seg_a[box], self._seg_ab[box], self._seg_ab2[box]
+        t = np.clip(((p - a) * ab).sum(axis=1) / ab2, 0.0, 1.0)
+        closest = a + ab * t[:, None]
         dist = np.hypot(*(closest - p).T)
         near = np.nonzero(dist <= radius)[0]
         best: dict[int, int] = {}
         for s in near[np.argsort(dist[near], kind="stable")]:
-            best.setdefault(int(self._seg_lane[s]), int(s))
+            best.setdefault(int(self._seg_lane[box[s]]), int(s))
         out = []
         for li, s in best.items():
             lid = self._lane_ids[li]
             shape_len = self._cum(lid)[-1]
-            s_along = self._seg_start[s] + t[s] * math.sqrt(ab2[s])
+            s_along = self._seg_start[box[s]] + t[s] * math.sqrt(ab2[s])
             pos = s_along * self.lane_length[lid] / max(shape_len, 1e-9)
             out.append((lid, float(pos), float(dist[s]), math.atan2(ab[s, 1], ab[s, 0])))
         out.sort(key=lambda c: (c[2], c[0]))
@@ -304,9 +315,19 @@ class RoadNet:
         """Whether the junction from ``from_edge`` to ``to_edge`` enters a roundabout."""
         return to_edge in self.roundabout_edges and from_edge not in self.roundabout_edges
 
+    def offers_choice(self, edge: str) -> bool:
+        """Whether the junction at the end of ``edge`` leads onto more than one road (U-turns
+        not counted)."""
+        out = self._choice.get(edge)
+        if out is None:
+            out = self._choice[edge] = sum(
+                1 for s in self.successors[edge]
+                if any(c.direction != "t" for c in self.connections[(edge, s)])) > 1
+        return out
+
     def via_length(self, from_edge: str, to_edge: str) -> float:
         """Shortest junction-internal length (m) between two connected edges."""
-        return min(c.via_length for c in self.connections[(from_edge, to_edge)])
+        return self._via_min[(from_edge, to_edge)]
 
     def shortest_paths(
         self, source: str, source_pos: float, targets: set[str]
@@ -320,8 +341,9 @@ class RoadNet:
         dist: dict[str, float] = {}
         pred: dict[str, str] = {}
         heap = []
+        via = self._via_min
         for n in self.successors.get(source, ()):
-            heapq.heappush(heap, (rest + self.via_length(source, n), n, source))
+            heapq.heappush(heap, (rest + via[(source, n)], n, source))
         remaining = set(targets)
         while heap and remaining:
             d, e, p = heapq.heappop(heap)
@@ -333,7 +355,7 @@ class RoadNet:
             base = d + self.edge_length[e]
             for n in self.successors.get(e, ()):
                 if n not in dist:
-                    heapq.heappush(heap, (base + self.via_length(e, n), n, e))
+                    heapq.heappush(heap, (base + via[(e, n)], n, e))
         out = {}
         for t in targets:
             if t not in dist:

@@ -180,7 +180,7 @@ def build_route(net: RoadNet, edges: list[str], start: _Cand, end: _Cand) -> Ego
     def add(piece: np.ndarray) -> None:
         nonlocal length
         h = lane_headings(piece, heads[-1][-1] if heads else 0.0)
-        if pieces and len(piece) and np.allclose(pieces[-1][-1], piece[0]):
+        if pieces and len(piece) and _close(pieces[-1][-1], piece[0]):
             piece, h = piece[1:], h[1:]
         if len(piece):
             if pieces:
@@ -210,8 +210,7 @@ def build_route(net: RoadNet, edges: list[str], start: _Cand, end: _Cand) -> Ego
             junction=node, junction_type=net.node_type.get(node, ""), from_edge=edge,
             to_edge=nxt, from_lane=conn.from_lane, to_lane=conn.to_lane, via=conn.via,
             direction=conn.direction,
-            choice=sum(1 for s in net.successors[edge]
-                       if any(c.direction != "t" for c in net.connections[(edge, s)])) > 1,
+            choice=net.offers_choice(edge),
             roundabout=edge in net.roundabout_edges or nxt in net.roundabout_edges,
             pos=round(length, 2),
         ))
@@ -235,13 +234,22 @@ def build_route(net: RoadNet, edges: list[str], start: _Cand, end: _Cand) -> Ego
     )
 
 
+def _close(a: np.ndarray, b: np.ndarray) -> bool:
+    """``np.allclose(a, b)`` for two points (2,) m, without numpy's per-call overhead."""
+    return (abs(float(a[0]) - float(b[0])) <= 1e-8 + 1e-5 * abs(float(b[0]))
+            and abs(float(a[1]) - float(b[1])) <= 1e-8 + 1e-5 * abs(float(b[1])))
+
+
 def lane_headings(shape: np.ndarray, before: float) -> list[float]:
     """The direction (rad) of a lane piece ((N, 2) m) at each vertex: of the segment starting
     there, the last vertex that of the segment ending there; a zero-length segment takes its
     neighbour's, a single point ``before``."""
     n = len(shape)
-    segs = [math.atan2(float(shape[i + 1][1] - shape[i][1]), float(shape[i + 1][0] - shape[i][0]))
-            if float(np.hypot(*(shape[i + 1] - shape[i]))) > 1e-9 else None for i in range(n - 1)]
+    pts = np.asarray(shape, dtype=float).tolist()
+    segs = []
+    for (x0, y0), (x1, y1) in zip(pts[:-1], pts[1:]):
+        dx, dy = x1 - x0, y1 - y0
+        segs.append(math.atan2(dy, dx) if float(np.hypot(dx, dy)) > 1e-9 else None)
     known = [h for h in segs if h is not None]
     if not known:
         return [before] * n
