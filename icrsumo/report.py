@@ -799,7 +799,9 @@ def guard_tradeoff(doc: dict, path: Path) -> None:
             continue
         x, y = 100 * g["false_blocks"], 100 * g["detection"]
         ax.scatter([x], [y], s=40, color=f"C{i % 10}", zorder=3)
-        ax.annotate(name, (x, y), textcoords="offset points", xytext=(6, 4), fontsize=8)
+        right = x > 60  # the label inside the axes, beside its point
+        ax.annotate(name, (x, y), textcoords="offset points", xytext=(-7 if right else 7, 0),
+                    ha="right" if right else "left", va="center", fontsize=8)
     ax.set_xlim(-2, 102)
     ax.set_ylim(-2, 102)
     ax.set_xlabel("false blocks: baseline, paraphrase, noise (%)")
