@@ -14,7 +14,7 @@ from typing import NoReturn
 
 from . import __version__
 from .defaults import DEFAULT_AGENT, DEFAULT_SUITE
-from .errors import InputError
+from .errors import InputError, check_key_env
 from .metrics import DEFAULT_SCORING, scoring_names
 from .resources import bundled_suites
 from .vocab import ALL_FAMILIES, CONTROL_FAMILIES, FAMILIES, Family
@@ -160,7 +160,7 @@ def _agents(args: argparse.Namespace) -> tuple[str, ...]:
         option = "--llm-key-env" if args.llm_key_env else "--llm-image"
         raise InputError(option, "", "applies to llm:MODEL@URL agents only, and none is given",
                          f"add --agent llm:MODEL@http://HOST:PORT/v1, or leave {option} out")
-    from .agents.llm import check_key_env, with_options
+    from .agents.llm import with_options
 
     if args.llm_key_env:
         check_key_env(args.llm_key_env, "--llm-key-env", args.llm_key_env)

@@ -86,7 +86,6 @@ def to_observation(obs: dict[str, Any], info: dict[str, Any]) -> Observation:
                        instruction_id=int(info["instruction_id"]), notice=text(obs["notice"]))
 
 
-
 #: the keys ``reset(options=...)`` reads
 RESET_OPTIONS = ("family", "k")
 
@@ -108,6 +107,7 @@ def _reset_options(options: object) -> dict[str, Any]:
         raise InputError("options", repr(unknown[0]), "unknown reset option",
                          f"{hint}use {', '.join(RESET_OPTIONS)}")
     return options
+
 
 class _Penalties(EpisodeCallback):
     """The penalised event infractions of an episode as they happen (``kinds``, in order): the

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 
 class InputError(Exception):
     """Bad user input. The CLI prints ``str(err)`` as one line and exits with status 2.
@@ -103,3 +105,13 @@ def check_seed(seed: object, option: str = "--seed") -> int:
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
         raise InputError(option, short(seed), "out of range", "use a whole number from 0 to 2**63 - 1")
     return seed
+
+
+def check_key_env(name: object, option: str, value: str) -> str:
+    """``name`` when it is an environment variable's name (the variable that holds an API or
+    shared key: the key itself never goes on a command line); an InputError naming ``option``
+    (and its ``value``) otherwise."""
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+        raise InputError(option, value, f"key_env={name!r} is not a variable name",
+                         "name the variable that holds the key, e.g. key_env=MY_KEY")
+    return name

@@ -139,9 +139,10 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
     (default ``dest``: ``OUT/show/AGENT_ROUTE_FAMILY_K``). ``agent`` is the stored name; the
     agent is rebuilt from the spec the folder's configuration records for it (``spec``
     overrides: for folders written before icrsumo recorded specs)."""
-    from .agents.identity import fingerprint, of_text, short
+    from .agents.identity import fingerprint, short
     from .agents.registry import PYTHON_PREFIX, agent_factory
     from .evaluation.run import bind_agents, read_config
+    from .guards.base import guarded_fingerprint
     from .instructions.store import read_instruction_sets
     from .logs import dumps_log, loads_log
     from .render import write_image
@@ -174,7 +175,7 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
     guard = entry.get("guard") if isinstance(entry, dict) else None
     guards = _guards(guard, out) if isinstance(guard, str) and guard else None
     if guards is not None:  # a guarded row: its fingerprint covers the guard (evaluation.run)
-        fp = of_text(f"{fp}+guard:{fingerprint(guards[0])}")
+        fp = guarded_fingerprint(fp, fingerprint(guards[0]))
     if stored_fp and fp != stored_fp:
         raise InputError("--agent", agent, f"the agent {spec} is now another agent (fingerprint {short(fp)}, "
                          f"stored {short(stored_fp)}): the replay would not be the stored "

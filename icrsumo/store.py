@@ -35,7 +35,8 @@ CREATE TABLE IF NOT EXISTS episodes (
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 """
 
-
+#: integer columns that count things (0 when a store written before them has NULL)
+_COUNTS = ("model_calls", "invalid_answers", "guard_checked", "guard_blocked")
 
 #: bytes free under which an SQLite I/O error is taken as the disk being full
 _FULL_BELOW = 1 << 20
@@ -54,6 +55,7 @@ def _disk_full(err: sqlite3.Error, path: Path) -> bool:
     except OSError:
         return False
     return st.f_bavail * st.f_frsize < _FULL_BELOW
+
 
 class ResultStore:
     """Episode records (and compressed episode logs) keyed by (agent, route, family, k, seed)."""
@@ -191,8 +193,7 @@ class ResultStore:
 
     def _add_columns(self) -> None:
         for col, decl in (("outside_m", "REAL DEFAULT 0"), ("fingerprint", "TEXT DEFAULT ''"),
-                          ("model_calls", "INTEGER DEFAULT 0"), ("invalid_answers", "INTEGER DEFAULT 0"),
-                          ("guard_checked", "INTEGER DEFAULT 0"), ("guard_blocked", "INTEGER DEFAULT 0")):
+                          *((c, "INTEGER DEFAULT 0") for c in _COUNTS)):
             if col not in self._cols:
                 self._db.execute(f"ALTER TABLE episodes ADD COLUMN {col} {decl}")
                 self._cols.add(col)
@@ -233,14 +234,14 @@ class ResultStore:
             d = dict(zip(cols, r))
             if d.get("outside_m") is None:
                 d["outside_m"] = 0.0
-            for c in ("model_calls", "invalid_answers", "guard_checked", "guard_blocked"):
+            for c in _COUNTS:
                 if d.get(c) is None:
                     d[c] = 0
             try:
                 if d["status"] == "done" and None in (d["ds"], d["rc"], d["is_"]):
                     raise TypeError("a finished episode without its scores")
                 for c in ("ds", "rc", "is_", "length", "duration", "k", "seed", "attempts", "outside_m",
-                          "model_calls", "invalid_answers", "guard_checked", "guard_blocked"):
+                          *_COUNTS):
                     if d[c] is not None and (not isinstance(d[c], (int, float)) or not math.isfinite(d[c])):
                         raise TypeError(f"{c} is {d[c]!r}, not a finite number")
                 raw = json.loads(d["infractions"] or "[]")

@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, check_key_env
 from ..llmio import (
     Invalid,
     ResponseCache,
@@ -186,15 +186,6 @@ def parse_spec(spec: str, option: str = "--agent") -> LLMSettings:
             raise InputError(option, spec, f"seed={one['seed']!r}", "use a non-negative integer")
         s = replace(s, seed=int(one["seed"]))
     return s
-
-
-def check_key_env(name: str, option: str, value: str) -> str:
-    """``name`` when it is an environment variable's name; an InputError naming ``option``
-    (and its ``value``) otherwise."""
-    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
-        raise InputError(option, value, f"key_env={name!r} is not a variable name",
-                         "name the variable that holds the key, e.g. key_env=OPENAI_API_KEY")
-    return name
 
 
 def with_options(spec: str, key_env: str | None = None, image: bool = False) -> str:

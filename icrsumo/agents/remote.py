@@ -37,7 +37,6 @@ import contextlib
 import http.client
 import json
 import os
-import re
 import socket
 import uuid
 import zlib
@@ -48,7 +47,7 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 
 from ..dynamics import Control
-from ..errors import InputError
+from ..errors import InputError, check_key_env
 from .base import Action, AgentError, AgentTimeout, EpisodeInfo, Observation
 
 PROTOCOL = "icrsumo-agent/1"
@@ -208,10 +207,7 @@ def parse_url(url: str) -> tuple[str, int, float, str | None]:
 def shared_key(var: str, option: str, value: str) -> str:
     """The shared key held by the environment variable ``var``; an InputError naming ``option``
     when ``var`` is no variable name or is not set (the key itself never goes on a command line)."""
-    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", var or ""):
-        raise InputError(option, value, f"key_env {var!r} is not a variable name",
-                         "name the variable that holds the shared key, e.g. ICRSUMO_AGENT_KEY")
-    key = os.environ.get(var, "").strip()
+    key = os.environ.get(check_key_env(var, option, value), "").strip()
     if not key:
         raise InputError(option, value, f"the shared key variable {var} is not set",
                          f"export {var}=... (the same key on both sides) before starting")

@@ -19,7 +19,7 @@ from ..agents.registry import (
 )
 from ..errors import InputError, check_seed, expect
 from ..fsio import FolderLock, read_json
-from ..guards.base import guarded_name
+from ..guards.base import guarded_fingerprint, guarded_name
 from ..instructions.families import ALL_FAMILIES, FAMILIES
 from ..metrics import SCORINGS, score_episode, scoring_names
 from ..store import ResultStore
@@ -155,7 +155,7 @@ def identify_agents(factories: Mapping[str, Callable], replacing: tuple[str, ...
     """Names and fingerprints of resolved agents and of their guarded rows (``guards``: guard
     spec -> factory); an InputError when two different agents (other fingerprints) share a name,
     when two guards share a name, or when ``replacing`` names no agent of the run."""
-    from ..agents.identity import fingerprint, of_text, short
+    from ..agents.identity import fingerprint, short
     from ..guards.registry import guard_name
 
     names: dict[str, str] = {}
@@ -180,7 +180,7 @@ def identify_agents(factories: Mapping[str, Callable], replacing: tuple[str, ...
                              "give one of them another name (the guard class's name attribute)")
         gfp = fingerprint(gfactory)
         for name in list(dict.fromkeys(names.values())):
-            fps[guarded_name(name, gname)] = of_text(f"{fps[name]}+guard:{gfp}")
+            fps[guarded_name(name, gname)] = guarded_fingerprint(fps[name], gfp)
     for name in replacing:
         if name not in fps:
             raise InputError("--replace-agent", name, "is not an agent of this run",

@@ -22,9 +22,26 @@ FALLBACK_TEXT = "Follow the road."
 MAX_REASON = 200
 
 
+#: what joins an agent's name and its guard's in a guarded row's name (and fingerprint)
+GUARD_SEP = "+guard:"
+
+
 def guarded_name(agent: str, guard: str) -> str:
     """The row name of ``agent`` behind ``guard``."""
-    return f"{agent}+guard:{guard}"
+    return f"{agent}{GUARD_SEP}{guard}"
+
+
+def split_row(name: str) -> tuple[str, str] | None:
+    """(agent, guard) of a guarded row name, None for an unguarded one."""
+    agent, sep, guard = name.rpartition(GUARD_SEP)
+    return (agent, guard) if sep and agent and guard else None
+
+
+def guarded_fingerprint(agent_fp: str, guard_fp: str) -> str:
+    """The fingerprint of a guarded row: its agent's and its guard's together."""
+    from ..agents.identity import of_text
+
+    return of_text(f"{agent_fp}{GUARD_SEP}{guard_fp}")
 
 
 class GuardError(RuntimeError):
@@ -59,11 +76,8 @@ class NavPlan:
 
     def next_lane_change(self) -> PlanStep | None:
         """The next lane change the route needs, if it comes before the next junction maneuver."""
-        for s in self.steps:
-            if s.kind.startswith("lane_change"):
-                return s
-            return None
-        return None
+        first = self.steps[0] if self.steps else None
+        return first if first is not None and first.kind.startswith("lane_change") else None
 
     def describe(self, n: int = 3) -> str:
         """One line for people and language models: the next ``n`` maneuvers."""

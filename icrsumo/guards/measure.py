@@ -32,19 +32,13 @@ import numpy as np
 from ..aggregate import holm, paired_test
 from ..types import EpisodeRecord
 from ..vocab import EpisodeStatus, Family
+from .base import split_row
 
 GUARD_FORMAT = "icrsumo-guard/1"
 #: goal-preserving families whose blocks are false blocks (ambiguity is reported apart)
 PRESERVING = (Family.BASELINE, Family.PARAPHRASE, Family.NOISE)
 #: the issue's targets: guard -> (detection at least, false blocks at most, misleading ΔDS shrink at least)
 TARGETS = {"plan": {"detection": 0.95, "false_blocks": 0.01, "dDS_shrink": 0.80}}
-_SEP = "+guard:"
-
-
-def split_row(name: str) -> tuple[str, str] | None:
-    """(agent, guard) of a guarded row name, None for an unguarded one."""
-    agent, sep, guard = name.rpartition(_SEP)
-    return (agent, guard) if sep and agent and guard else None
 
 
 def _rate(blocked: int, checked: int) -> float | None:

@@ -26,13 +26,15 @@ from functools import cache
 
 import numpy as np
 
+from .minilm import DIM
+
 PAD, UNK, NUM = "<pad>", "<unk>", "<num>"
 _TOKEN = re.compile(r"[a-z]+|\d+")
 ENCODERS = ("token", "ngram", "minilm", "minilm-tuned")
 #: encoders whose input is a float vector of ``length`` values rather than ids
 VECTOR_ENCODERS = ("minilm", "minilm-tuned")
-#: values per token of ``minilm-tuned``'s states
-STATE_WIDTH = 384
+#: values per token of ``minilm-tuned``'s states (the encoder's width)
+STATE_WIDTH = DIM
 
 
 def words(text: str) -> list[str]:

@@ -282,6 +282,13 @@ class Episode:
             return True
         return False
 
+    def _text(self, k: int) -> str:
+        """The text the agent reads while instruction ``k`` is shown (-1: none, or the guard's
+        stand-in when it blocked the first one)."""
+        if self.guarded is not None:
+            return self.guarded.text(k)
+        return self.texts[k] if k >= 0 else ""
+
     def _observation(self) -> Observation:
         """The agent's observation at the current step (BEV, speed, instruction, notice)."""
         state, params, progress, k_instr = self.state, self.params, self.progress, self.k_shown
@@ -304,8 +311,7 @@ class Episode:
                           tl_states=frame.tl_states, route=self.ego_route if self.needs_route else None,
                           progress=progress)
         obs = Observation(t=frame.t, bev=bev, speed=state.speed,
-                          instruction=self.texts[k_instr] if k_instr >= 0 else
-                          self.guarded.text(k_instr) if self.guarded is not None else "",
+                          instruction=self._text(k_instr),
                           instruction_id=self.instr[k_instr].id if k_instr >= 0 else -1,
                           notice=notice, world=world)
         for cb in callbacks:
