@@ -2,7 +2,7 @@
 
 The Python API (:mod:`icrsumo.api`) is exported here and imported on first use, so that
 ``import icrsumo`` stays light: ``icrsumo.evaluate(...)``, ``icrsumo.load_suite(...)``,
-``icrsumo.run_episode(...)``.
+``icrsumo.run_episode(...)``, ``icrsumo.digest(out)``, ``icrsumo.compare_digests(out, other)``.
 """
 
 from __future__ import annotations
@@ -18,12 +18,15 @@ _LAZY = {
     "Suite": "icrsumo.api",
     "EvalResult": "icrsumo.evaluation.run",
     "run_episode": "icrsumo.api",
+    "digest": "icrsumo.api",
+    "compare_digests": "icrsumo.api",
 }
 
-__all__ = ["EvalResult", "Suite", "__version__", "evaluate", "load_suite", "run_episode"]
+__all__ = ["EvalResult", "Suite", "__version__", "compare_digests", "digest", "evaluate", "load_suite",
+           "run_episode"]
 
 if TYPE_CHECKING:
-    from .api import Suite, evaluate, load_suite, run_episode
+    from .api import Suite, compare_digests, digest, evaluate, load_suite, run_episode
     from .evaluation.run import EvalResult
 
 

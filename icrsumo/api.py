@@ -4,9 +4,11 @@
   :class:`~icrsumo.evaluation.EvalResult`;
 * :func:`load_suite`: a route suite converted and with its instructions, as a :class:`Suite`;
 * :func:`run_episode`: one closed-loop episode (:func:`icrsumo.sim.episode.run_episode`), with
-  an agent given as an object or a spec.
+  an agent given as an object or a spec;
+* :func:`digest` and :func:`compare_digests`: an evaluation folder's digest (``icrsumo digest``,
+  :mod:`icrsumo.digests`), and two runs compared by it.
 
-All three are exported lazily by :mod:`icrsumo` (``icrsumo.evaluate(...)``). Bad input raises
+All five are exported lazily by :mod:`icrsumo` (``icrsumo.evaluate(...)``). Bad input raises
 :class:`icrsumo.errors.InputError`, whose message is the one line the CLI prints.
 """
 
@@ -22,13 +24,14 @@ from .errors import InputError
 
 if TYPE_CHECKING:
     from .agents.base import Agent
+    from .digests import Comparison
     from .evaluation import EvalOptions, EvalResult
     from .scenario import Scenario
     from .sim.callbacks import EpisodeCallback
     from .sim.episode import RunOptions
     from .types import EpisodeLog, InstructionSet
 
-__all__ = ["Suite", "evaluate", "load_suite", "run_episode"]
+__all__ = ["Suite", "compare_digests", "digest", "evaluate", "load_suite", "run_episode"]
 
 
 def _names(value: str | Sequence[str] | None) -> tuple[str, ...] | None:
@@ -224,3 +227,33 @@ def run_episode(scenario: Scenario | str | Path, instruction_set: InstructionSet
     sc = scenario if not isinstance(scenario, (str, Path)) else read_scenario(Path(scenario))
     instance = make_agent(agent) if isinstance(agent, str) else agent
     return _run(sc, instruction_set, instance, options or RunOptions(), callbacks)
+
+
+def digest(out: str | Path = "icr_out") -> str:
+    """The digest of the evaluation folder ``out`` (``sha256:`` and 64 hex digits): one SHA-256
+    over every episode in ``out/results.sqlite`` (its stored log, or a crashed episode's status
+    and message) and the folder's scoring, computed from the store (:mod:`icrsumo.digests`
+    defines the bytes). The same digest on another machine means every episode is the same.
+    Raises :class:`icrsumo.errors.InputError` for a folder that is not an evaluation folder or
+    a damaged store."""
+    from .digests import folder_digest
+
+    try:
+        return folder_digest(Path(out)).digest
+    except InputError as err:
+        raise for_python(err) from None
+
+
+def compare_digests(out: str | Path, other: str | Path) -> Comparison:
+    """Compare the evaluation folder ``out`` with ``other``, a second folder or a digest
+    (``sha256:HEX`` or 64 hex digits): a :class:`icrsumo.digests.Comparison` (``same``, both
+    digests and, for two folders that differ, ``first_difference``: the first episode in key
+    order stored in one only or with another log). Two folders of different scorings or suites,
+    and an ``other`` that is neither a folder nor a digest, raise
+    :class:`icrsumo.errors.InputError`."""
+    from .digests import compare
+
+    try:
+        return compare(Path(out), other)
+    except InputError as err:
+        raise for_python(err) from None

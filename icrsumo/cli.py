@@ -197,7 +197,18 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
              if result.crashed else "")
     print(f"{result.done} episodes done, {result.crashed} crashed{again}, {time.perf_counter() - t0:.0f} s "
           f"-> {args.out}", file=sys.stderr)
+    print(_digest_line(result.digest), file=sys.stderr)
     return 1 if args.fail_on_crash and result.crashed else 0
+
+
+def _digest_line(digest: object) -> str:
+    """The last line of an evaluation: its digest (hex digits only, never text from a file)."""
+    from .digests import shown_digest
+
+    shown = shown_digest(digest)
+    if shown == "none":
+        return "digest: none (a stored episode log cannot be read: icrsumo digest OUT names it)"
+    return f"digest: {shown} (same digest on another machine = every episode the same)"
 
 
 def _cmd_attack(args: argparse.Namespace) -> int:
@@ -288,6 +299,25 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_digest(args: argparse.Namespace) -> int:
+    from .digests import compare, folder_digest
+
+    if args.other is None:
+        d = folder_digest(Path(args.out))
+        print(d.digest)
+        print(f"icrsumo: {len(d.episodes)} stored episodes, scoring {d.scoring}; "
+              + ("summary.json holds the same digest" if d.summary_agrees else f"note: {d.summary}"),
+              file=sys.stderr)
+        return 0
+    c = compare(Path(args.out), args.other)
+    print("same" if c.same else "differs")
+    print(f"  {args.out}: {c.digest}")
+    print(f"  {args.other if Path(args.other).exists() else 'given'}: {c.other}")
+    if c.first_difference:
+        print(f"  first difference: {c.first_difference}")
+    return 0 if c.same else 1
+
+
 def _cmd_collect(args: argparse.Namespace) -> int:
     from .learn.collect import CollectOptions, collect
 
@@ -308,6 +338,18 @@ def _cmd_train(args: argparse.Namespace) -> int:
                       steps=args.steps, device=args.device, seed=args.seed)
     m = train(cfg, [Path(d) for d in args.data], Path(args.out), encode_workers=args.workers)
     print(f"step {m.get('step')}: validation {m.get('val', {})} -> {Path(args.out) / 'model.pt'}")
+    return 0
+
+
+def _cmd_export_exact(args: argparse.Namespace) -> int:
+    from .learn.exact.quantize import export_file
+
+    ck = export_file(Path(args.checkpoint), Path(args.out), [Path(c) for c in args.calibration],
+                     frames=args.frames, percentile=args.percentile)
+    worst = max(ck.meta["bounds"].values())
+    print(f"{args.out}: exact checkpoint of {Path(args.checkpoint).name} ({ck.config.encoder} encoder), "
+          f"calibrated on {ck.meta['calibration_frames']} frames and {ck.meta['calibration_texts']} texts; "
+          f"largest partial sum {worst} < 2**24")
     return 0
 
 
@@ -558,6 +600,19 @@ def build_parser() -> argparse.ArgumentParser:
                    "stored scores)")
     r.set_defaults(func=_cmd_report)
 
+    dg = sub.add_parser(
+        "digest", help="one SHA-256 over every stored episode of a run; compare two runs with it",
+        description="Print the digest of an evaluation folder: one SHA-256 over every episode in "
+        "OUT/results.sqlite (each one's stored log) and the scoring rules, computed from the store "
+        "(summary.json's digest is checked against it); the same digest on another machine means every "
+        "episode is the same. With OTHER (a second out folder, or a digest: sha256:HEX or 64 hex digits) "
+        "print same or differs, and for two folders the first episode that differs. Exit status 0: "
+        "same (or no OTHER), 1: differs, 2: bad input, or folders of different scorings or suites.",
+    )
+    dg.add_argument("out", help="the --out folder of icrsumo evaluate")
+    dg.add_argument("other", nargs="?", help="a second out folder, or a digest (sha256:HEX)")
+    dg.set_defaults(func=_cmd_digest)
+
     ca = sub.add_parser(
         "check-agent", help="check that an agent follows the agent protocol, in plain words",
         description="Load an agent spec, check reset/act/name/privileged, drive two episodes of a short "
@@ -640,6 +695,22 @@ def build_parser() -> argparse.ArgumentParser:
                    help="processes computing a pretrained encoder's embeddings of the training texts "
                    "(encoder minilm; default: number of cores)")
     t.set_defaults(func=_cmd_train)
+
+    x = sub.add_parser(
+        "export-exact", help="make a trained checkpoint exact: the same bits on every CPU, no torch to run",
+        description="Quantise a model.pt of icrsumo train to integer weights and activations whose sums "
+        "float32 carries exactly (docs/exact.md), calibrated on frames of icrsumo collect folders; "
+        "writes OUT (.npz), usable as --agent OUT.",
+    )
+    x.add_argument("checkpoint", help="model.pt written by icrsumo train")
+    x.add_argument("--out", required=True, help="the exact checkpoint to write (NAME.npz)")
+    x.add_argument("--calibration", required=True, action="append",
+                   help="folder written by icrsumo collect (repeatable): its frames calibrate the scales")
+    x.add_argument("--frames", type=int, default=4000,
+                   help="calibration frames, evenly spaced (default 4000)")
+    x.add_argument("--percentile", type=float, default=99.99,
+                   help="percentile of each activation mapped to its top (default 99.99)")
+    x.set_defaults(func=_cmd_export_exact)
     for command in sub.choices.values():  # --debug also after the subcommand
         command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                              help="show the traceback of an error instead of its one line")

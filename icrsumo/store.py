@@ -279,11 +279,26 @@ class ResultStore:
             row = self._db.execute(
                 "SELECT log FROM episodes WHERE agent=? AND route_id=? AND family=? AND k=? AND seed=?",
                 (agent, route_id, family, k, seed)).fetchone()
-        if row is None or row[0] is None:
+        return None if row is None else self._log_text((agent, route_id, family, k, seed), row[0])
+
+    def _log_text(self, key: tuple, blob: object) -> str | None:
+        """The JSON text of a stored log column (None when there is none); a damaged one is an
+        InputError naming the episode."""
+        if blob is None:
             return None
         try:
-            return zlib.decompress(row[0]).decode("utf-8")
+            return zlib.decompress(blob).decode("utf-8")
         except (zlib.error, TypeError, UnicodeDecodeError) as err:
-            raise InputError(self.path, f"episode {agent}/{route_id}/{family}/{k}/{seed}",
+            raise InputError(self.path, f"episode {'/'.join(map(str, key))}",
                              f"its stored log is damaged ({err})",
                              "delete that row (or move the store away) and rerun") from None
+
+    def logs(self) -> Iterator[tuple[tuple, str, str, str | None]]:
+        """Every stored episode as (key, status, message, log JSON text or None), in the
+        store's order, read by one query (a consistent snapshot, also while a run is storing
+        episodes): what :mod:`icrsumo.digests` hashes. Values are as stored (the caller checks
+        their types); a damaged log is an InputError naming the episode."""
+        sql = "SELECT agent, route_id, family, k, seed, status, message, log FROM episodes"
+        with self._guard("reading"):
+            for *key, status, message, blob in self._db.execute(sql):
+                yield tuple(key), status, message, self._log_text(tuple(key), blob)

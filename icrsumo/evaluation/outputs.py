@@ -19,7 +19,8 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
                   scenarios: Path, instr_dir: Path, not_shown: int = 0, rescored_short: int = 0,
                   not_shown_why: str = "") -> dict:
     """Write summary.json, tables and figures of ``records`` into ``out`` (the table is printed
-    unless ``opts.quiet``); returns the summary. ``rescored_short``: rescored episodes that
+    unless ``opts.quiet``); returns the summary, whose ``digest`` covers every episode in
+    ``store`` (:mod:`icrsumo.digests`) under ``opts.scoring``. ``rescored_short``: rescored episodes that
     ended before the report's scoring would have ended them (counted in the summary,
     ``episodes.rescored_short``, and named on stderr). ``not_shown``: episodes in the store that are
     not of this evaluation (other agents, routes, families or k), counted in the summary
@@ -33,6 +34,7 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     families = tuple(f for f in ALL_FAMILIES if f in opts.families)  # canonical order
     summary = summarize(records, suite=opts.suite, seed=opts.seed, k=opts.k, families=families)
     summary["scoring"] = opts.scoring
+    summary["digest"] = store_digest(store, opts.scoring)
     ends: dict = {}
     answers: dict = {}
     attribution = attach(summary, records, episode_decisions(store, records, instr_dir, ends, answers),
@@ -66,6 +68,19 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     if not opts.quiet:
         print(table)
     return summary
+
+
+def store_digest(store: ResultStore, scoring: str) -> str | None:
+    """The digest of every episode in ``store`` under ``scoring`` (:mod:`icrsumo.digests`), or
+    None, named on stderr, when the store has none (a damaged stored log: the tables are still
+    written, as they are without that episode's decisions)."""
+    from ..digests import run_digest
+
+    try:
+        return run_digest(store, scoring)
+    except InputError as err:
+        print(f"icrsumo: note: no digest: {err.line()}", file=sys.stderr)
+        return None
 
 
 def write_html(out: Path, summary: dict, records: list[EpisodeRecord], attribution: dict,

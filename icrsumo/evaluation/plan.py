@@ -11,7 +11,7 @@ from pathlib import Path
 
 from ..agents.base import Agent
 from ..convert import CONVERTER_VERSION, ConvertOptions, convert_routes, safe_name
-from ..errors import InputError
+from ..errors import InputError, check_seed, expect
 from ..fsio import OutFolder, dumps_json, read_json, write_atomic
 from ..guards.base import guarded_name
 from ..instructions.baseline_bank import BaselineBank, load_baseline_bank
@@ -110,6 +110,28 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None)
     if bank is not None:
         config.update(baseline_bank_sha256=bank.sha256, baseline_bank_file=str(bank.path))
     return config
+
+
+def read_config(out: Path) -> dict:
+    """The checked configuration (OUT/config.json) of an evaluation folder that has a store; an
+    InputError when ``out`` is not one."""
+    out = Path(out)
+    cfg_path = out / "config.json"
+    for need in (cfg_path, out / "results.sqlite"):
+        if not need.is_file():
+            why = "is a folder, not a file" if need.is_dir() else "is missing" if not need.exists() \
+                else "cannot be read (a broken link?)"
+            raise InputError(need, "", f"{why}: {out} is not an evaluation folder",
+                             "pass the --out folder of icrsumo evaluate")
+    cfg = read_json(cfg_path, "evaluation configuration", "restore it from a copy")
+    fix = "restore it from a copy"
+    expect(cfg, dict, cfg_path, "", "the configuration", fix)
+    for key, kind in (("suite", str), ("k", int), ("seed", int)):
+        expect(cfg.get(key), kind, cfg_path, key, key, fix)
+    if not 1 <= cfg["k"] <= 64:
+        raise InputError(cfg_path, "k", f"{cfg['k']} is out of range (1 to 64)", fix)
+    check_seed(cfg["seed"], f"{cfg_path}: seed")
+    return cfg
 
 
 def _resolve_suite(opts: EvalOptions, out: Path) -> tuple[Path, list[str]]:

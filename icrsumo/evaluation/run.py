@@ -17,8 +17,8 @@ from ..agents.registry import (
     agent_name,
     python_agent,
 )
-from ..errors import InputError, check_seed, expect
-from ..fsio import FolderLock, read_json
+from ..errors import InputError
+from ..fsio import FolderLock
 from ..guards.base import guarded_fingerprint, guarded_name
 from ..instructions.families import ALL_FAMILIES, FAMILIES
 from ..metrics import SCORINGS, score_episode, scoring_names
@@ -29,7 +29,7 @@ from .backends import run_jobs
 from .inference import route_jobs, start_inference, stop_inference
 from .options import EvalOptions
 from .outputs import write_outputs
-from .plan import Job, no_routes, plan_jobs, prepare_suite, skip_reason
+from .plan import Job, no_routes, plan_jobs, prepare_suite, read_config, skip_reason
 from .progress import Progress
 
 #: attempts an episode gets at most
@@ -46,7 +46,8 @@ class EvalResult:
     folder; ``episodes``: episodes of the plan, ``ran``: those run now (the others were stored
     already), ``done`` / ``crashed``: the plan's stored episodes by status; ``inference``: agent
     name -> statistics of its batched inference processes (``batch_inference`` only: resets,
-    acts, batches, largest_batch, processes, and the seconds wait_s, io_s, run_s)."""
+    acts, batches, largest_batch, processes, and the seconds wait_s, io_s, run_s); ``digest``:
+    the summary's digest."""
 
     summary: dict = field(repr=False)
     out: Path
@@ -55,6 +56,12 @@ class EvalResult:
     done: int
     crashed: int
     inference: Mapping[str, dict] = field(default_factory=dict)
+
+    @property
+    def digest(self) -> str | None:
+        """The run's digest (``summary["digest"]``: every stored episode and the scoring,
+        :mod:`icrsumo.digests`), None when a damaged stored log leaves the store without one."""
+        return self.summary.get("digest")
 
 
 def resolve_agents(specs: tuple) -> dict[str, Callable]:
@@ -306,28 +313,6 @@ def run_queue(queue: list[Job], opts: EvalOptions, store: ResultStore, progress:
                                         message=outcome.message[:MAX_MESSAGE]))
                 progress.tick()
         queue = retry
-
-
-def read_config(out: Path) -> dict:
-    """The checked configuration (OUT/config.json) of an evaluation folder that has a store; an
-    InputError when ``out`` is not one."""
-    out = Path(out)
-    cfg_path = out / "config.json"
-    for need in (cfg_path, out / "results.sqlite"):
-        if not need.is_file():
-            why = "is a folder, not a file" if need.is_dir() else "is missing" if not need.exists() \
-                else "cannot be read (a broken link?)"
-            raise InputError(need, "", f"{why}: {out} is not an evaluation folder",
-                             "pass the --out folder of icrsumo evaluate")
-    cfg = read_json(cfg_path, "evaluation configuration", "restore it from a copy")
-    fix = "restore it from a copy"
-    expect(cfg, dict, cfg_path, "", "the configuration", fix)
-    for key, kind in (("suite", str), ("k", int), ("seed", int)):
-        expect(cfg.get(key), kind, cfg_path, key, key, fix)
-    if not 1 <= cfg["k"] <= 64:
-        raise InputError(cfg_path, "k", f"{cfg['k']} is out of range (1 to 64)", fix)
-    check_seed(cfg["seed"], f"{cfg_path}: seed")
-    return cfg
 
 
 def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> dict:

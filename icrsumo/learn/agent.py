@@ -34,10 +34,21 @@ _FIX = ("give the path of a model.pt written by icrsumo train, or a shipped agen
 
 @cache
 def _policy(path: str, device: str, runtime: str = "onnx"):
-    """The process's policy of checkpoint ``path`` on ``device`` in ``runtime`` (loaded once)."""
+    """The process's policy of checkpoint ``path`` on ``device`` in ``runtime`` (loaded once).
+    An exact checkpoint (``.npz``, :mod:`icrsumo.learn.exact`) runs in numpy on the CPU whatever
+    ``device`` and ``runtime`` say (no torch)."""
+    if is_exact(path):
+        from .exact.model import ExactPolicy
+
+        return ExactPolicy(Path(path))
     from .nets import Policy
 
     return Policy(Path(path), device=device, runtime=runtime)
+
+
+def is_exact(path: str | Path) -> bool:
+    """Whether ``path`` names an exact checkpoint (``.npz``): CPU-independent, loaded without torch."""
+    return Path(path).suffix == ".npz"
 
 
 def checkpoint_path(checkpoint: str | Path) -> Path:
@@ -80,7 +91,7 @@ class LearnedAgent:
         stopped = self.clock.update(obs.t, obs.speed)
         out = self.policy(obs.bev[None], [obs.instruction], np.array([obs.speed], dtype=np.float32),
                           np.array([stopped], dtype=np.float32))
-        return _action(out["waypoints"][0], out["speed"][0], out["stop_prob"][0])
+        return _action(out["waypoints"][0], out["speed"][0], bool(_stops(out)[0]))
 
     #: batched-inference hook (``act_batch(agents, observations)``) used by serve-agent
     act_batch = staticmethod(lambda agents, batch: act_batch(agents, batch))
@@ -101,15 +112,21 @@ def act_batch(agents: list[LearnedAgent], batch: list[Observation]) -> list[Acti
         out = policy(np.stack([o.bev for o in obs]),
                      [o.instruction for o in obs],
                      np.array([o.speed for o in obs], dtype=np.float32), stopped)
-        for i, wps, v, p in zip(idx, out["waypoints"], out["speed"], out["stop_prob"]):
-            actions[i] = _action(wps, v, p)
+        for i, wps, v, stop in zip(idx, out["waypoints"], out["speed"], _stops(out)):
+            actions[i] = _action(wps, v, bool(stop))
     return actions  # type: ignore[return-value]
 
 
-def _action(wps: np.ndarray, speed: float, stop_prob: float) -> Action:
-    """The action of one output row: waypoints (K, 2) m; target speed 0 when the stop
-    probability is above 0.5, else the predicted speed (m/s, at least 0)."""
-    target = 0.0 if stop_prob > 0.5 else float(max(speed, 0.0))
+def _stops(out: dict[str, np.ndarray]) -> np.ndarray:
+    """(B,) bool: the policy's stop decisions (an exact policy gives them; a float one's stop
+    probability above 0.5)."""
+    return out["stop"] if "stop" in out else out["stop_prob"] > 0.5
+
+
+def _action(wps: np.ndarray, speed: float, stop: bool) -> Action:
+    """The action of one output row: waypoints (K, 2) m; target speed 0 when ``stop``, else
+    the predicted speed (m/s, at least 0)."""
+    target = 0.0 if stop else float(max(speed, 0.0))
     return Action(waypoints=wps.astype(np.float64), target_speed=target)
 
 
@@ -148,9 +165,13 @@ class MinilmAgent(LearnedAgent):
         raised before any episode runs (``icrsumo evaluate`` calls it). Only the agents that
         need the encoder have it, so the other learned agents add nothing to start-up."""
         from .minilm import encoder
-        from .nets import read_checkpoint
 
-        read_checkpoint(checkpoint_path(cls.checkpoint))
+        path = checkpoint_path(cls.checkpoint)
+        if is_exact(path):
+            from .exact.checkpoint import load
+        else:
+            from .nets import read_checkpoint as load
+        load(path)
         encoder()
 
 

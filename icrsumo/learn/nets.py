@@ -25,7 +25,6 @@ from __future__ import annotations
 import math
 import pickle
 import re
-from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -36,8 +35,10 @@ from torch import nn
 from ..errors import InputError, expect
 from ..fsio import unreadable
 from ..vocab import Intent
+from .config import _CHECKPOINT_FIX, MINILM_SHAPE, ModelConfig, config_from_dict
+from .config import config_dict as _cfg_dict
+from .config import short_repr as _short
 from .labels import ARC_M, STOP_BELOW
-from .text import ENCODERS, TextEncoder
 
 CHECKPOINT_FORMAT = "icrsumo-agent/1"
 #: format of the training state OUT/last.pt
@@ -45,25 +46,6 @@ STATE_FORMAT = CHECKPOINT_FORMAT + "+train"
 #: intents of the auxiliary head (the baseline's; others map to follow)
 INTENTS = (Intent.FOLLOW, Intent.LEFT, Intent.RIGHT, Intent.STRAIGHT, Intent.LANE_LEFT, Intent.LANE_RIGHT)
 _ARC = torch.tensor(ARC_M, dtype=torch.float32)
-
-
-@dataclass(frozen=True)
-class ModelConfig:
-    """Architecture: language ``encoder`` (token / ngram), ids per text ``text_len``, hash
-    ``buckets`` (ngram), ``vocab`` (token), embedding size ``embed``, language vector ``lang``,
-    CNN base width ``width``, MLP width ``hidden``."""
-
-    encoder: str = "ngram"
-    text_len: int = 160
-    buckets: int = 8192
-    vocab: tuple[str, ...] = field(default=())
-    embed: int = 64
-    lang: int = 128
-    width: int = 32
-    hidden: int = 256
-
-    def text_encoder(self) -> TextEncoder:
-        return TextEncoder(self.encoder, self.text_len, self.vocab, self.buckets)
 
 
 class _TokenEncoder(nn.Module):
@@ -92,8 +74,6 @@ class _NgramEncoder(nn.Module):
         return self.mlp(mean)
 
 
-#: all-MiniLM-L6-v2's layer shape: width, attention heads, feed-forward width, LayerNorm epsilon
-MINILM_SHAPE = (384, 12, 1536, 1e-12)
 #: a BERT layer's parts here and in Hugging Face's state dicts
 BERT_PARTS = {"q": "attention.self.query", "k": "attention.self.key", "v": "attention.self.value",
               "o": "attention.output.dense", "ln1": "attention.output.LayerNorm",
@@ -374,13 +354,6 @@ class Trainer:
         self.step = step
 
 
-def _cfg_dict(cfg: ModelConfig) -> dict:
-    d = asdict(cfg)
-    d["vocab"] = list(cfg.vocab)
-    return d
-
-
-_CHECKPOINT_FIX = "use a model.pt written by icrsumo train, or a shipped agent (bev-token, bev-ngram, ...)"
 _RESUME_FIX = "delete it to start over, or use another --out folder"
 
 
@@ -390,45 +363,6 @@ def _first_line(err: BaseException) -> str:
     text = (text.splitlines() or [""])[0].split(". ")[0].strip()
     text = text[:160] + ("..." if len(text) > 160 else "")
     return f"{type(err).__name__}: {text}" if text else type(err).__name__
-
-
-def _short(value: object) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
-def config_from_dict(d: object, path: Path | str = "checkpoint", place: str = "config",
-                     fix: str = _CHECKPOINT_FIX) -> ModelConfig:
-    """The :class:`ModelConfig` of a checkpoint's ``config`` dict; unknown keys, values of the
-    wrong type and out-of-range sizes are InputErrors naming ``path`` and the key."""
-    d = dict(expect(d, dict, path, place, "the model config", fix))
-    known = {f.name: f for f in fields(ModelConfig)}
-    for key in d:
-        if key not in known:
-            raise InputError(path, f"{place}.{key}", "unknown model option", fix)
-    vocab = expect(d.get("vocab", []), (list, tuple), path, f"{place}.vocab", "the vocabulary", fix)
-    d["vocab"] = tuple(vocab)
-    for i, w in enumerate(d["vocab"]):
-        expect(w, str, path, f"{place}.vocab[{i}]", "a word", fix)
-    for key, f in known.items():
-        if key != "vocab" and key in d:
-            expect(d[key], {"str": str, "int": int}[f.type], path, f"{place}.{key}", "the value", fix)
-    cfg = ModelConfig(**d)
-    if cfg.encoder not in ENCODERS:
-        raise InputError(path, f"{place}.encoder", f"unknown encoder {_short(cfg.encoder)}", fix)
-    for key in ("text_len", "embed", "width", "hidden"):
-        if getattr(cfg, key) < 1:
-            raise InputError(path, f"{place}.{key}", f"{getattr(cfg, key)} is not a positive size", fix)
-    if cfg.lang < 2 or cfg.lang % 2:
-        raise InputError(path, f"{place}.lang", f"{cfg.lang} is not a positive even size", fix)
-    if cfg.encoder == "minilm-tuned" and cfg.text_len % MINILM_SHAPE[0]:
-        raise InputError(path, f"{place}.text_len", f"{cfg.text_len} is not a whole number of "
-                         f"{MINILM_SHAPE[0]}-value token states", fix)
-    if cfg.encoder == "ngram" and cfg.buckets < 2:
-        raise InputError(path, f"{place}.buckets", f"{cfg.buckets} hash buckets (at least 2)", fix)
-    if cfg.encoder == "token" and len(cfg.vocab) < 2:
-        raise InputError(path, f"{place}.vocab", f"{len(cfg.vocab)} words (at least <pad> and <unk>)", fix)
-    return cfg
 
 
 def check_weights(weights: object, cfg: ModelConfig, path: Path | str = "checkpoint", place: str = "model",

@@ -9,12 +9,14 @@ import sqlite3
 import subprocess
 import sys
 import time
+import zlib
 from pathlib import Path
 
 import pytest
 
 from icrsumo.cli import main
 from icrsumo.convert import CONVERTER_VERSION
+from icrsumo.digests import DIGEST_RE, folder_digest
 from icrsumo.evaluation import EvalOptions, run_evaluation
 from icrsumo.store import ResultStore
 
@@ -68,12 +70,44 @@ def test_workers_and_rerun_give_identical_results(reference, tmp_path):
     ref_out, _ = reference
     evaluate(_opts(tmp_path, workers=2))
     assert (tmp_path / "summary.json").read_bytes() == (ref_out / "summary.json").read_bytes()
+    # so is the digest in it (every stored episode's log), and it is the store's
+    digest = json.loads((tmp_path / "summary.json").read_text())["digest"]
+    assert DIGEST_RE.fullmatch(digest) and folder_digest(tmp_path).digest == digest
     assert _records(tmp_path) == _records(ref_out)
     # a rerun resumes: nothing left to do, same outputs
     before = (tmp_path / "results.sqlite").stat().st_size
     evaluate(_opts(tmp_path, workers=2))
     assert (tmp_path / "summary.json").read_bytes() == (ref_out / "summary.json").read_bytes()
     assert (tmp_path / "results.sqlite").stat().st_size >= before
+
+
+def test_the_digest_is_the_stores_and_names_a_changed_episode(reference, tmp_path, capsys):
+    """summary.json's digest is what `icrsumo digest OUT` computes from the store; a copy of the
+    folder is the same, and one stored log edited in it makes `digest A B` name that episode."""
+    ref_out, summary = reference
+    capsys.readouterr()
+    assert main(["digest", str(ref_out)]) == 0
+    got = capsys.readouterr()
+    assert got.out == f"{summary['digest']}\n" and "20 stored episodes, scoring lb1" in got.err
+    assert "summary.json holds the same digest" in got.err
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for name in ("config.json", "results.sqlite", "summary.json"):
+        (copy / name).write_bytes((ref_out / name).read_bytes())
+    assert main(["digest", str(ref_out), str(copy)]) == 0
+    assert capsys.readouterr().out.splitlines()[0] == "same"
+    key = ("instruction-follower", "tiny_012", "noise", 1, 2026)
+    where = "WHERE agent=? AND route_id=? AND family=? AND k=? AND seed=?"
+    with sqlite3.connect(copy / "results.sqlite") as db:
+        text = zlib.decompress(db.execute(f"SELECT log FROM episodes {where}", key).fetchone()[0]).decode()
+        db.execute(f"UPDATE episodes SET log=? {where}", (zlib.compress(text.replace("]", " ]", 1).encode()),
+                                                          *key))
+    assert main(["digest", str(ref_out), str(copy)]) == 1
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "differs" and out[-1] == ("  first difference: episode instruction-follower/tiny_012/"
+                                               "noise/1/2026: its stored logs differ")
+    assert main(["digest", str(copy)]) == 0
+    assert "summary.json: digest sha256:" in capsys.readouterr().err  # the stored one no longer agrees
 
 
 def test_report_rebuilds_without_simulating(reference, tmp_path, capsys):
@@ -195,7 +229,7 @@ def test_ray_backend_gives_identical_results(reference, tmp_path, monkeypatch):
     assert (tmp_path / "summary.json").read_bytes() == (ref_out / "summary.json").read_bytes()
 
 
-def test_sigkill_then_resume(reference, tmp_path):
+def test_sigkill_then_resume(reference, tmp_path, capsys):
     ref_out, _ = reference
     out = tmp_path / "killed"
     cmd = [sys.executable, "-m", "icrsumo", "evaluate", "--suite", "tiny", "--agent", "route-oracle",
@@ -221,12 +255,17 @@ def test_sigkill_then_resume(reference, tmp_path):
     with sqlite3.connect(db) as c:
         killed_at = c.execute("SELECT COUNT(*) FROM episodes").fetchone()[0]
     assert 5 <= killed_at < 20
+    capsys.readouterr()
     assert main(cmd[3:]) == 0
     with sqlite3.connect(db) as c:
         keys = c.execute("SELECT agent, route_id, family, k, seed FROM episodes").fetchall()
     assert len(keys) == len(set(keys)) == 20
     assert _records(out) == _records(ref_out)
     assert (out / "summary.json").read_bytes() == (ref_out / "summary.json").read_bytes()
+    # the run's last line: its digest, the reference run's (same episodes, however they were run)
+    last = capsys.readouterr().err.splitlines()[-1]
+    digest = reference[1]["digest"]
+    assert last == f"digest: {digest} (same digest on another machine = every episode the same)"
 
 
 def test_crashing_agent_is_retried_then_stored(tmp_path, capsys):

@@ -214,7 +214,7 @@ def _bad_checkpoints(tmp: Path) -> dict[str, tuple[Path, list[str]]]:
     cases["truncated-head"] = (write("head", raw[:100]), ["truncated or not a torch file"])
     cases["text"] = (write("text", b"these are not weights\n"), ["not a torch file"])
     np.savez(tmp / "arrays.npz", a=np.zeros(3))
-    cases["npz"] = (tmp / "arrays.npz", ["truncated or not a torch file"])
+    cases["npz"] = (tmp / "arrays.npz", ["not an icrsumo exact checkpoint"])
     cases["hostile-pickle"] = (_save(Hostile(str(tmp / "pwned")), tmp / "hostile.pt"),
                                ["refused by torch.load(weights_only=True)", "posix.system"])
     cases["custom-class"] = (_save({"format": nets.CHECKPOINT_FORMAT, "x": Custom()}, tmp / "custom.pt"),

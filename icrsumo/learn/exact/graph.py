@@ -1,0 +1,215 @@
+"""The exact network, defined once: the integer graph of a learned agent, over a pluggable
+matrix product (``Engine``).
+
+Every matrix product multiplies integers (activations: 0..255 or -127..127; weights: int8 per
+output channel) and adds an integer bias; :func:`icrsumo.learn.exact.quantize.export_exact`
+checks that no partial sum of any output channel can reach 2**24 (``max |x| * sum |w| + |b|``),
+so a float32 product is exact whatever its summation order. What follows a product is
+elementwise IEEE-754 arithmetic in a fixed order: a requantisation is one float32 multiply by a
+per-channel constant, round half to even (``numpy.rint``) and a clip; mixed-scale sums (the
+FiLM modulation, the MLP's language/speed inputs) are fixed sequences of float32 multiplies and
+adds. None of these depends on the CPU.
+
+Layouts: the BEV ``(B, 7, 128, 128)`` uint8 (0/255, read as value/255); convolution
+activations are rows ``(B*H*W, C)`` (NHWC), so each convolution is one product of an im2col
+matrix (pure data movement) with ``(kh*kw*C_in, C_out)`` weights. The language side (per
+distinct text, :func:`language`) is computed in int64 (exact in any order) and gives
+:class:`LangState`, the per-text constants of :func:`fuse`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.lib.stride_tricks import as_strided
+
+#: partial sums of a float32 product stay below this (the exporter checks every layer)
+EXACT_LIMIT = 1 << 24
+#: the driving network's matrix products (an Engine computes them); each but the first reads
+#: activations 0..``{name}.top`` (the exporter picks the top, at most UMAX, that keeps the product
+#: exact), the first the BEV's 0..255
+PRODUCTS = ("stem", "c2", "c3", "c4", "fc", "mlp0", "mlp1", "head")
+#: activation range of the unsigned (post-ReLU) activations and of the signed language input
+UMAX, SMAX = 255, 127
+#: range of the language vector (only ever multiplied in int64, so it can be wide)
+LMAX = 32767
+#: sigmoid / tanh tables: inputs quantised to 1/TABLE_STEP over [-TABLE_HALF, TABLE_HALF] / TABLE_STEP
+TABLE_STEP, TABLE_HALF = 256, 2048
+#: the GRU's hidden state is carried in units of 2**-HIDDEN_BITS
+HIDDEN_BITS = 14
+
+#: ``mm(x, layer)``: the float32 array of ``x @ W[layer] + b[layer]`` computed exactly (x holds
+#: integers, any numeric dtype)
+Engine = Callable[[np.ndarray, str], np.ndarray]
+
+
+@dataclass(frozen=True)
+class LangState:
+    """Per-text constants of :func:`fuse` (float32): FiLM multiplier ``film_m`` and offset
+    ``film_b`` of the third convolution's channels (C3,), the language part of the first MLP
+    layer ``mlp_l`` (H,), bias included; ``lang_q`` the (lang,) int64 language vector."""
+
+    film_m: np.ndarray
+    film_b: np.ndarray
+    mlp_l: np.ndarray
+    lang_q: np.ndarray
+
+
+def requant(acc: np.ndarray, m: np.ndarray, lo: int, hi: int) -> np.ndarray:
+    """``clip(rint(acc * m), lo, hi)`` in float32 (one correctly rounded multiply, round half
+    to even); ``acc`` float32 holding exact integers, ``m`` (C,) float32 broadcast over rows."""
+    y = np.multiply(acc, m, dtype=np.float32)
+    np.rint(y, out=y)
+    np.clip(y, lo, hi, out=y)
+    return y
+
+
+def patches4(bev: np.ndarray) -> np.ndarray:
+    """``(B, C, H, W)`` uint8 -> ``(B*H/4*W/4, C*16)`` non-overlapping 4x4 patches, columns in
+    the order (c, kh, kw) of a torch weight ``(C_out, C, 4, 4)`` flattened. Each patch row's 4
+    bytes move as one uint32 (4x fewer elements to copy)."""
+    b, c, h, w = bev.shape
+    words = np.ascontiguousarray(bev, dtype=np.uint8).view(np.uint32)      # (B, C, H, W/4)
+    p = words.reshape(b, c, h // 4, 4, w // 4).transpose(0, 2, 4, 1, 3)    # (B, i, j, c, kh)
+    return np.ascontiguousarray(p).view(np.uint8).reshape(b * (h // 4) * (w // 4), c * 16)
+
+
+def im2col3s2(rows: np.ndarray, b: int, h: int, w: int) -> np.ndarray:
+    """NHWC rows ``(B*H*W, C)`` -> ``(B*H/2*W/2, 9*C)``: the 3x3 windows of a stride-2,
+    padding-1 convolution, columns in the order (kh, kw, c)."""
+    c = rows.shape[1]
+    xp = np.zeros((b, h + 2, w + 2, c), dtype=rows.dtype)
+    xp[:, 1:-1, 1:-1] = rows.reshape(b, h, w, c)
+    s0, s1, s2, s3 = xp.strides
+    ho, wo = h // 2, w // 2
+    v = as_strided(xp, (b, ho, wo, 3, 3, c), (s0, 2 * s1, 2 * s2, s1, s2, s3), writeable=False)
+    return v.reshape(b * ho * wo, 9 * c)
+
+
+def fuse(a: Mapping[str, np.ndarray], mm: Engine, bev: np.ndarray, lang: list[LangState],
+         speed: np.ndarray, stopped: np.ndarray) -> dict[str, np.ndarray]:
+    """The driving network: ``bev`` (B, 7, H, W) uint8, one :class:`LangState` per row,
+    ``speed`` m/s and ``stopped`` s (B,) -> ``waypoints`` (B, K, 2) m, ``speed`` (B,) m/s,
+    ``stop`` (B,) bool (stop logit > 0) and ``stop_logit`` (B,), all float32 but ``stop``."""
+    b, _, h, w = bev.shape
+    x = requant(mm(patches4(bev), "stem"), a["stem.m"], 0, float(a["c2.top"]))
+    h, w = h // 4, w // 4
+    x = requant(mm(im2col3s2(x, b, h, w), "c2"), a["c2.m"], 0, float(a["c3.top"]))
+    h, w = h // 2, w // 2
+    acc = mm(im2col3s2(x, b, h, w), "c3")
+    h, w = h // 2, w // 2
+    c3 = acc.shape[1]
+    film_m = np.stack([s.film_m for s in lang])[:, None, :]
+    film_b = np.stack([s.film_b for s in lang])[:, None, :]
+    y = np.multiply(acc.reshape(b, h * w, c3), film_m, dtype=np.float32)
+    np.add(y, film_b, out=y)
+    np.rint(y, out=y)
+    np.clip(y, 0, float(a["c4.top"]), out=y)
+    x = requant(mm(im2col3s2(y.reshape(b * h * w, c3), b, h, w), "c4"), a["c4.m"], 0, float(a["fc.top"]))
+    x = requant(mm(x.reshape(b, -1), "fc"), a["fc.m"], 0, float(a["mlp0.top"]))
+    # first MLP layer: image part (a product), language part (per text), speed and stop time
+    sp = np.divide(np.asarray(speed, np.float32), np.float32(10.0), dtype=np.float32)
+    st = np.divide(np.asarray(stopped, np.float32), np.float32(5.0), dtype=np.float32)
+    hid = np.multiply(mm(x, "mlp0"), a["mlp0.k"], dtype=np.float32)
+    np.add(hid, np.stack([s.mlp_l for s in lang]), out=hid)
+    np.add(hid, sp[:, None] * a["mlp0.wsp"], out=hid)
+    np.add(hid, st[:, None] * a["mlp0.wst"], out=hid)
+    x = requant(hid, a["mlp0.m"], 0, float(a["mlp1.top"]))
+    x = requant(mm(x, "mlp1"), a["mlp1.m"], 0, float(a["head.top"]))
+    acc = mm(x, "head")
+    k = a["arc"].shape[0]
+    out = np.multiply(acc, a["head.d"], dtype=np.float32)
+    wps = out[:, : 2 * k].reshape(b, k, 2).copy()
+    np.add(wps[..., 0], a["arc"], out=wps[..., 0])
+    speed_out = np.multiply(out[:, 2 * k], np.float32(10.0), dtype=np.float32)
+    return {"waypoints": wps, "speed": speed_out, "stop": acc[:, 2 * k + 1] > 0,
+            "stop_logit": out[:, 2 * k + 1].copy()}
+
+
+# ---------------------------------------------------------------------- language (int64)
+def _i64(x: np.ndarray) -> np.ndarray:
+    return np.asarray(x, dtype=np.int64)
+
+
+def _dense64(x: np.ndarray, a: Mapping[str, np.ndarray], name: str) -> np.ndarray:
+    """``x @ w + b`` of layer ``name`` in int64 (exact in any order)."""
+    return _i64(x) @ _i64(a[f"{name}.w"]) + _i64(a[f"{name}.b"])
+
+
+def _requant64(acc: np.ndarray, m: np.ndarray, lo: int, hi: int) -> np.ndarray:
+    """:func:`requant` of int64 accumulations (converted exactly: the exporter bounds them)."""
+    return requant(_i64(acc).astype(np.float32), m, lo, hi).astype(np.int64)
+
+
+def _mlp_lang(a: Mapping[str, np.ndarray], x: np.ndarray) -> np.ndarray:
+    """The two-layer language MLP (ReLU between) from int input ``x`` to the language vector."""
+    x = _requant64(_dense64(x, a, "lang.l1"), a["lang.l1.m"], 0, float(a["lang.l2.top"]))
+    return _requant64(_dense64(x, a, "lang.l2"), a["lang.l2.m"], -LMAX, LMAX)
+
+
+def _table(t: np.ndarray, pre: np.ndarray) -> np.ndarray:
+    """A sigmoid / tanh table (float64, 2*TABLE_HALF+1 entries) at float64 inputs ``pre``."""
+    q = np.clip(np.rint(pre * float(TABLE_STEP)), -TABLE_HALF, TABLE_HALF).astype(np.int64)
+    return t[q + TABLE_HALF]
+
+
+def _gru(a: Mapping[str, np.ndarray], d: str, xs: list[np.ndarray]) -> np.ndarray:
+    """One GRU direction (``f`` or ``r``) over the int8 embeddings ``xs``: the final hidden
+    state in units of 2**-HIDDEN_BITS (int64). Gate pre-activations are exact int64 products
+    scaled per channel (float64), sigmoid and tanh come from the checkpoint's tables."""
+    one = float(1 << HIDDEN_BITS)
+    hq = np.zeros(a[f"gru.{d}.whh"].shape[0], dtype=np.int64)
+    sig, tanh = a["gru.sigmoid"], a["gru.tanh"]
+    for x in xs:
+        gi = (_i64(x) @ _i64(a[f"gru.{d}.wih"])) * a[f"gru.{d}.kih"] + a[f"gru.{d}.bih"]
+        gh = (hq @ _i64(a[f"gru.{d}.whh"])) * a[f"gru.{d}.khh"] + a[f"gru.{d}.bhh"]
+        n3 = gi.shape[0] // 3
+        r = _table(sig, gi[:n3] + gh[:n3])
+        z = _table(sig, gi[n3:2 * n3] + gh[n3:2 * n3])
+        n = _table(tanh, gi[2 * n3:] + r * gh[2 * n3:])
+        h = (1.0 - z) * n + z * (hq / one)
+        hq = np.rint(h * one).astype(np.int64)
+    return hq
+
+
+def language(a: Mapping[str, np.ndarray], encoder: str, ids: np.ndarray) -> LangState:
+    """The per-text constants of one text's encoder input ``ids`` (token / ngram: (L,) ids,
+    0-padded; minilm: the (384,) sentence embedding, float32)."""
+    if encoder == "ngram":
+        ids = _i64(ids)
+        ids = ids[ids > 0]
+        total = _i64(a["lang.emb"])[ids].sum(0) if len(ids) else np.zeros(a["lang.emb"].shape[1], np.int64)
+        mean = np.divide(np.multiply(total.astype(np.float32), a["lang.emb_m"], dtype=np.float32),
+                         np.float32(max(len(ids), 1)), dtype=np.float32)
+        lang_q = _mlp_lang(a, np.clip(np.rint(mean), -SMAX, SMAX).astype(np.int64))
+    elif encoder == "token":
+        ids = _i64(ids)
+        n = max(int((ids > 0).sum()), 1)
+        emb = _i64(a["lang.emb"])
+        xs = [emb[i] for i in ids[:n]]
+        hf, hr = _gru(a, "f", xs), _gru(a, "r", xs[::-1])
+        real = np.concatenate([hf, hr]).astype(np.float32)
+        lang_q = np.clip(np.rint(np.multiply(real, a["lang.out_m"], dtype=np.float32)), -LMAX, LMAX
+                         ).astype(np.int64)
+    elif encoder == "minilm":
+        x = np.multiply(np.asarray(ids, np.float32), a["lang.in_m"], dtype=np.float32)
+        lang_q = _mlp_lang(a, np.clip(np.rint(x), -SMAX, SMAX).astype(np.int64))
+    else:
+        raise ValueError(f"no exact language encoder {encoder!r}")
+    return constants(a, lang_q)
+
+
+def constants(a: Mapping[str, np.ndarray], lang_q: np.ndarray) -> LangState:
+    """:class:`LangState` of the int8 language vector ``lang_q``: FiLM's gamma and beta and the
+    language part of the first MLP layer as exact int64 products, then fixed float64 / float32
+    elementwise steps."""
+    film = _dense64(lang_q, a, "film").astype(np.float64) * a["film.k"]
+    c3 = film.shape[0] // 2
+    gamma, beta = film[:c3], film[c3:]
+    film_m = ((1.0 + gamma) * a["c3.k"]).astype(np.float32)
+    film_b = (beta * a["c3.inv"]).astype(np.float32)
+    mlp_l = ((_i64(lang_q) @ _i64(a["mlp0.wl"])).astype(np.float64) * a["mlp0.kl"] + a["mlp0.bias"]
+             ).astype(np.float32)
+    return LangState(film_m=film_m, film_b=film_b, mlp_l=mlp_l, lang_q=_i64(lang_q))

@@ -1,0 +1,66 @@
+"""The fast path of an exact checkpoint: :class:`ExactPolicy`, the graph of
+:mod:`icrsumo.learn.exact.graph` with float32 matrix products (numpy's BLAS, whatever its kernel,
+blocking or thread count: the products are sums of integers below 2**24, exact in any order).
+A batch runs as one product per layer; its rows are bitwise those of single calls."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .checkpoint import ExactCheckpoint, load
+from .graph import PRODUCTS, LangState, fuse, language
+
+#: distinct texts whose language state is kept (then the cache starts over)
+LANG_CACHE = 4096
+
+
+class FloatEngine:
+    """``mm(x, layer)`` = ``x @ W + b`` in float32 (the weights converted once)."""
+
+    def __init__(self, arrays: dict[str, np.ndarray]) -> None:
+        self._w = {n: (arrays[f"{n}.w"].astype(np.float32), arrays[f"{n}.b"].astype(np.float32))
+                   for n in PRODUCTS}
+
+    def __call__(self, x: np.ndarray, layer: str) -> np.ndarray:
+        w, b = self._w[layer]
+        out = np.matmul(x.astype(np.float32, copy=False), w)
+        out += b
+        return out
+
+
+class ExactPolicy:
+    """An exact checkpoint's policy (``path``: its ``.npz`` file, or an :class:`ExactCheckpoint`).
+    A call takes ``bev`` (B, 7, H, W) uint8 0/255, instruction ``texts`` (B), ``speed`` (m/s)
+    and ``stopped`` (s) (B,) and returns ``waypoints`` (B, K, 2) m, ``speed`` (B,) m/s,
+    ``stop`` (B,) bool and ``stop_logit`` (B,). ``engine`` replaces the float32 products (the
+    int64 reference: :func:`icrsumo.learn.exact.reference.int64_engine`)."""
+
+    runtime = "exact"
+    device = "cpu"
+
+    def __init__(self, path: Path | str | ExactCheckpoint, engine=None) -> None:
+        ck = path if isinstance(path, ExactCheckpoint) else load(path)
+        self.checkpoint = ck
+        self.cfg, self.meta, self.arrays = ck.config, ck.meta, ck.arrays
+        self.mm = engine(self.arrays) if engine is not None else FloatEngine(self.arrays)
+        self.text = self.cfg.text_encoder()
+        self._lang: dict[str, LangState] = {}
+
+    def language(self, texts: list[str]) -> list[LangState]:
+        """The :class:`LangState` of each text (computed once per distinct text, alone)."""
+        missing = [t for t in dict.fromkeys(texts) if t not in self._lang]
+        if missing and len(self._lang) + len(missing) > LANG_CACHE:
+            self._lang.clear()
+        for text in missing:
+            self._lang[text] = language(self.arrays, self.cfg.encoder, self.text.encode(text))
+        return [self._lang[t] for t in texts]
+
+    def __call__(self, bev: np.ndarray, texts: list[str], speed: np.ndarray,
+                 stopped: np.ndarray) -> dict[str, np.ndarray]:
+        bev = np.ascontiguousarray(bev, dtype=np.uint8)
+        if bev.ndim != 4 or bev.shape[1] != 7 or bev.shape[2] % 32 or bev.shape[3] % 32:
+            raise ValueError(f"bev of shape {bev.shape}: expected (B, 7, H, W), H and W multiples of 32")
+        return fuse(self.arrays, self.mm, bev, self.language(list(texts)),
+                    np.asarray(speed, np.float32).reshape(-1), np.asarray(stopped, np.float32).reshape(-1))
