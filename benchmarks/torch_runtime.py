@@ -1,5 +1,6 @@
-"""The shipped learned agents with their network run by torch on the CPU instead of ONNX
-Runtime (the inference of icrsumo 0.x before issue 17), for before/after measurements:
+"""The shipped learned agents' float checkpoints with their network run by torch on the CPU
+(the inference of icrsumo 0.x before issue 17; the shipped agents run exact checkpoints since
+issue 42), for before/after measurements:
 
     icrsumo evaluate --agent benchmarks/torch_runtime.py:TokenTorch ...
 
@@ -7,13 +8,14 @@ Runtime (the inference of icrsumo 0.x before issue 17), for before/after measure
 
 from __future__ import annotations
 
-from icrsumo.learn.agent import NgramAgent, NgramAugAgent, TokenAgent
+from icrsumo.learn.agent import CHECKPOINTS, NgramAgent, NgramAugAgent, TokenAgent
 
 
 class TokenTorch(TokenAgent):
     """``bev-token`` with torch inference."""
 
     name = "bev-token-torch"
+    checkpoint = str(CHECKPOINTS / "bev-token.pt")  # the float checkpoint (the exact .npz runs no torch)
 
     def __init__(self, device: str = "cpu") -> None:
         super().__init__(device=device, runtime="torch")
@@ -23,6 +25,7 @@ class NgramTorch(NgramAgent):
     """``bev-ngram`` with torch inference."""
 
     name = "bev-ngram-torch"
+    checkpoint = str(CHECKPOINTS / "bev-ngram.pt")  # the float checkpoint (the exact .npz runs no torch)
 
     def __init__(self, device: str = "cpu") -> None:
         super().__init__(device=device, runtime="torch")
@@ -32,6 +35,7 @@ class NgramAugTorch(NgramAugAgent):
     """``bev-ngram-aug`` with torch inference."""
 
     name = "bev-ngram-aug-torch"
+    checkpoint = str(CHECKPOINTS / "bev-ngram-aug.pt")  # the float checkpoint (the exact .npz runs no torch)
 
     def __init__(self, device: str = "cpu") -> None:
         super().__init__(device=device, runtime="torch")

@@ -277,4 +277,34 @@ def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUIT
             found.append(Finding(False, f"act_batch() did not answer within {timeout:g} s"))
         except (Exception, SystemExit) as err:
             found.append(Finding(False, _raised("act_batch()", err)))
+    # 7. CPU independence (one line): what an exact checkpoint proves, what others cannot promise
+    found.append(_cpu_independence(probe, first.observations))
     return report()
+
+
+def _cpu_independence(agent: object, observations: list) -> Finding:
+    """Whether ``agent``'s actions are the same on every CPU: for an exact checkpoint, its fast
+    path against the int64 reference on the observations of the first run."""
+    policy = getattr(agent, "policy", None)
+    from .learn.exact.model import ExactPolicy
+
+    if isinstance(policy, ExactPolicy) and observations:
+        from .learn.exact.proof import Frames, prove
+        from .learn.labels import StopClock
+
+        clock = StopClock()
+        stopped = np.array([clock.update(o.t, o.speed) for o in observations], np.float32)
+        frames = Frames(np.packbits(np.stack([o.bev > 0 for o in observations]), axis=-1),
+                        tuple(o.instruction for o in observations),
+                        np.array([o.speed for o in observations], np.float32), stopped)
+        r = prove(policy.checkpoint, frames)
+        if r.exact:
+            return Finding(True, f"CPU-independent: exact checkpoint, its fast path equals the int64 "
+                                 f"reference bit for bit on {r.frames} observations (1 and 2 threads, "
+                                 "batches of 1 and 32)")
+        return Finding(False, f"not CPU-independent: the exact checkpoint's fast path differs from the "
+                              f"int64 reference on {r.mismatches} of {r.frames} observations ({r.first})")
+    if getattr(agent, "path", "").endswith(".pt"):
+        return Finding(None, "not CPU-independent: a float checkpoint's actions depend on the CPU; make it "
+                             "exact with icrsumo export-exact (docs/exact.md)")
+    return Finding(None, "CPU independence not checked: only exact checkpoints prove it (docs/exact.md)")

@@ -17,7 +17,11 @@ def check_device(name: str, option: str = "--device") -> str:
     if not isinstance(name, str) or not _DEVICE.fullmatch(name):
         raise InputError(option, str(name), "unknown device", fix)
     if name.startswith("cuda"):
-        import torch
+        try:
+            import torch
+        except ImportError:
+            raise InputError(option, name, "CUDA needs torch, which is not installed",
+                             "pip install 'icrsumo[train]' (or use cpu)") from None
 
         count = torch.cuda.device_count() if torch.cuda.is_available() else 0
         index = int(name.partition(":")[2] or 0)

@@ -415,9 +415,13 @@ class BevRenderer:
         if vehicles is not None and len(vehicles):
             veh = np.asarray(vehicles, dtype=np.float64).reshape(-1, 5)
             d2 = (veh[:, 0] - ex) ** 2 + (veh[:, 1] - ey) ** 2
-            veh = veh[d2 <= (reach + 0.5 * np.hypot(veh[:, 3], veh[:, 4])) ** 2]
+            # libm's hypot, cos and sin one value at a time, not numpy's SIMD loops (which may
+            # round differently on another CPU): the raster must not depend on the machine
+            half = np.array([math.hypot(vl, vw) for vl, vw in veh[:, 3:5].tolist()]).reshape(-1) * 0.5
+            veh = veh[d2 <= (reach + half) ** 2]
             if len(veh):
-                cy, sy = np.cos(veh[:, 2]), np.sin(veh[:, 2])
+                yaws = veh[:, 2].tolist()
+                cy, sy = np.array([math.cos(v) for v in yaws]), np.array([math.sin(v) for v in yaws])
                 u = np.stack([cy, sy], axis=1) @ lin * (veh[:, 3:4] / 2.0)   # half length, px
                 v = np.stack([-sy, cy], axis=1) @ lin * (veh[:, 4:5] / 2.0)  # half width, px
                 ctr = veh[:, :2] @ lin + off

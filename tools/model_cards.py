@@ -108,10 +108,11 @@ def card(name: str, summary: dict, train_s: float | None, eval_cmd: str,
         "- BEV encoder: 4 convolutions (stride 4, 2, 2, 2; 32-64-128-128 channels), the language "
         "vector modulating the 8 x 8 map (FiLM), then a 256-d feature; fusion MLP with the "
         "language vector, speed and stopped time; auxiliary intent head on the language vector.",
-        f"- {n_par:,} parameters, {size:.1f} MB (float32), loaded with "
-        "`torch.load(..., weights_only=True)`; on the CPU the network runs in ONNX Runtime, "
-        "exported from these weights in memory (`icrsumo.learn.runtime`); the tables below were "
-        "measured so.", "",
+        f"- {n_par:,} parameters, {size:.1f} MB (float32, `{name}.pt`, loaded with "
+        "`torch.load(..., weights_only=True)`); the agent runs its exact checkpoint `"
+        f"{name}.npz` (8-bit weights, integer activations, the same bits on every CPU, no torch: "
+        "docs/exact.md), made from it with `icrsumo export-exact`; the tables below were measured "
+        "with the float checkpoint in ONNX Runtime unless they say otherwise.", "",
         "## Data and training", "",
         "- Data: " + _data_line(meta["data"]) + "; 3 passes per route unless said otherwise, pass 0 "
         "clean and passes 1-2 with perturbations for recovery; route-oracle expert labels (its final "

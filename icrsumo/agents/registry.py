@@ -158,7 +158,7 @@ register("route-oracle", "icrsumo.agents.privileged:RouteOracle",
          description="privileged: follows the scenario's route (an upper reference)")
 register("instruction-follower", "icrsumo.agents.privileged:InstructionFollower",
          description="privileged: follows the instructions as a careful driver would")
-# learned agents whose checkpoints ship with the package (ONNX Runtime loads on first use)
+# learned agents whose exact checkpoints ship with the package (loaded on first use, no torch)
 for _name, _cls, _doc in (
         ("bev-token", "TokenAgent", "word-token GRU language encoder, trained on baseline phrasings only."),
         ("bev-ngram", "NgramAgent", "hashed character n-gram language encoder, baseline phrasings only."),
@@ -166,7 +166,7 @@ for _name, _cls, _doc in (
         ("bev-minilm", "MinilmAgent", "pretrained sentence encoder all-MiniLM-L6-v2 (frozen) + MLP, baseline "
          "phrasings only (needs icrsumo[minilm])."),
         ("bev-minilm-aug", "MinilmAugAgent", "as bev-minilm, trained with --augment-instructions.")):
-    if (CHECKPOINTS_DIR / f"{_name}.pt").is_file():
+    if (CHECKPOINTS_DIR / f"{_name}.npz").is_file():
         register(_name, f"icrsumo.learn.agent:{_cls}", description=f"learned: {_doc}")
 del _name, _cls, _doc
 

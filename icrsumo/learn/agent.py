@@ -1,15 +1,19 @@
 """Learned agents: drive from the BEV raster, the speed and the instruction text alone.
 
-A :class:`LearnedAgent` runs a :class:`icrsumo.learn.nets.Policy` (one per checkpoint, device
-and process, loaded on first use with ``weights_only=True``) on each observation and hands its
-waypoints and target speed to the built-in controller; a stop probability above 0.5 sets the
-target speed to 0. Its only memory is the time it has been stopped
+A :class:`LearnedAgent` runs a policy (one per checkpoint, device and process, loaded on first
+use) on each observation and hands its waypoints and target speed to the built-in controller; a
+stop decision sets the target speed to 0. An exact checkpoint (``.npz``) runs in
+:class:`icrsumo.learn.exact.model.ExactPolicy` (numpy, the same bits on every CPU, no torch); a
+float one (``.pt``, read with ``weights_only=True``) in :class:`icrsumo.learn.nets.Policy`
+(ONNX Runtime or torch: the ``train`` extra), where the stop decision is a stop probability
+above 0.5. Its only memory is the time it has been stopped
 (:class:`icrsumo.learn.labels.StopClock`). ``act_batch`` runs several episodes' observations in
 one forward pass per checkpoint, device and runtime (:func:`act_batch`, used by batched serving). The
 inference device is a constructor argument (``device``: cpu by default, cuda, cuda:N, auto).
 
-Shipped checkpoints live in ``icrsumo/learn/checkpoints/<name>.pt`` with a model card
-``<name>.md`` and the config ``<name>.toml`` that produced them.
+Shipped checkpoints live in ``icrsumo/learn/checkpoints/<name>.npz`` (exact, what the agents
+run) beside the float ``<name>.pt`` they were made from, a model card ``<name>.md`` and the
+config ``<name>.toml`` that trained it.
 
 A checkpoint that is missing, damaged, refused by the safe loader or does not fit its model,
 and a device that is unknown or not available, are :class:`icrsumo.errors.InputError` lines
@@ -28,8 +32,8 @@ from ..errors import InputError
 from .labels import StopClock
 
 CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
-_FIX = ("give the path of a model.pt written by icrsumo train, or a shipped agent "
-        f"({', '.join(sorted(p.stem for p in CHECKPOINTS.glob('*.pt')))})")
+_FIX = ("give the path of a model.pt written by icrsumo train (or its exact .npz), or a shipped agent "
+        f"({', '.join(sorted(p.stem for p in CHECKPOINTS.glob('*.npz')))})")
 
 
 @cache
@@ -134,21 +138,21 @@ class TokenAgent(LearnedAgent):
     """``bev-token``: word-token GRU language encoder, trained on baseline phrasings only."""
 
     name = "bev-token"
-    checkpoint = str(CHECKPOINTS / "bev-token.pt")  # the shipped file, never one in the cwd
+    checkpoint = str(CHECKPOINTS / "bev-token.npz")  # the shipped exact file, never one in the cwd
 
 
 class NgramAgent(LearnedAgent):
     """``bev-ngram``: hashed character n-gram language encoder, baseline phrasings only."""
 
     name = "bev-ngram"
-    checkpoint = str(CHECKPOINTS / "bev-ngram.pt")  # the shipped file, never one in the cwd
+    checkpoint = str(CHECKPOINTS / "bev-ngram.npz")  # the shipped exact file, never one in the cwd
 
 
 class NgramAugAgent(LearnedAgent):
     """``bev-ngram-aug``: as ``bev-ngram``, trained with ``--augment-instructions``."""
 
     name = "bev-ngram-aug"
-    checkpoint = str(CHECKPOINTS / "bev-ngram-aug.pt")  # the shipped file, never one in the cwd
+    checkpoint = str(CHECKPOINTS / "bev-ngram-aug.npz")  # the shipped exact file, never one in the cwd
 
 
 class MinilmAgent(LearnedAgent):
@@ -156,7 +160,7 @@ class MinilmAgent(LearnedAgent):
     (:mod:`icrsumo.learn.minilm`) through an MLP, baseline phrasings only."""
 
     name = "bev-minilm"
-    checkpoint = str(CHECKPOINTS / "bev-minilm.pt")  # the shipped file, never one in the cwd
+    checkpoint = str(CHECKPOINTS / "bev-minilm.npz")  # the shipped exact file, never one in the cwd
 
     @classmethod
     def check_ready(cls) -> None:
@@ -179,4 +183,4 @@ class MinilmAugAgent(MinilmAgent):
     """``bev-minilm-aug``: as ``bev-minilm``, trained with ``--augment-instructions``."""
 
     name = "bev-minilm-aug"
-    checkpoint = str(CHECKPOINTS / "bev-minilm-aug.pt")  # the shipped file, never one in the cwd
+    checkpoint = str(CHECKPOINTS / "bev-minilm-aug.npz")  # the shipped exact file, never one in the cwd

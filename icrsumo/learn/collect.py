@@ -116,9 +116,12 @@ class CollectOptions:
                                  "simulator's state, which a driver does not see)",
                                  "give a learned agent or a checkpoint")
             return
-        from .nets import read_checkpoint
-
-        read_checkpoint(checkpoint_path(self.driver))
+        path = checkpoint_path(self.driver)
+        if path.suffix == ".npz":
+            from .exact.checkpoint import load as read_checkpoint
+        else:
+            from .nets import read_checkpoint
+        read_checkpoint(path)
 
 
 def _is_eval_file(suite: str) -> bool:

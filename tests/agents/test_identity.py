@@ -64,7 +64,7 @@ def test_a_file_agent_changes_identity_with_its_file_and_its_helpers(tmp_path, m
 
 def test_learned_agents_are_their_checkpoints_and_builtins_differ():
     for name in ("bev-ngram-aug", "bev-ngram", "bev-token"):
-        digest = hashlib.sha256((CHECKPOINTS / f"{name}.pt").read_bytes()).hexdigest()
+        digest = hashlib.sha256((CHECKPOINTS / f"{name}.npz").read_bytes()).hexdigest()
         assert fingerprint(agent_factory(name)) == f"sha256:{digest}"
         assert fingerprint(agent_factory(name, device="cpu")) == f"sha256:{digest}"  # OnDevice
     assert fingerprint(agent_factory("route-oracle")) != fingerprint(agent_factory("instruction-follower"))

@@ -61,7 +61,7 @@ def test_the_built_ins_are_registered():
     assert BUILTIN is REGISTRY
     assert REGISTRY["route-oracle"] is RouteOracle and REGISTRY["instruction-follower"] is InstructionFollower
     learned = {"bev-token", "bev-ngram", "bev-ngram-aug", "bev-minilm", "bev-minilm-aug"}
-    shipped = {n for n in learned if (CHECKPOINTS / f"{n}.pt").is_file()}
+    shipped = {n for n in learned if (CHECKPOINTS / f"{n}.npz").is_file()}
     assert set(REGISTRY) == {"route-oracle", "instruction-follower"} | shipped
     assert DEFAULT_AGENT in REGISTRY
     assert REGISTRY.entry("route-oracle").description

@@ -1,4 +1,6 @@
-"""Shipped checkpoints: small, safe to load, deterministic, and drive in real SUMO."""
+"""Shipped checkpoints: small, safe to load, deterministic, and drive in real SUMO. The agents
+run the exact checkpoints (NAME.npz); the float ones they were made from (NAME.pt) ship beside
+them."""
 
 import numpy as np
 import pytest
@@ -10,7 +12,7 @@ from icrsumo.learn.agent import CHECKPOINTS, LearnedAgent, act_batch
 
 pytestmark = pytest.mark.sumo
 
-SHIPPED = sorted(p.stem for p in CHECKPOINTS.glob("*.pt"))
+SHIPPED = sorted(p.stem for p in CHECKPOINTS.glob("*.npz"))
 LEARNED = [n for n, c in BUILTIN.items() if issubclass(c, LearnedAgent)]
 
 
@@ -25,13 +27,18 @@ def test_two_learned_agents_ship_and_are_registered():
     assert len(SHIPPED) >= 2 and set(SHIPPED) <= set(LEARNED)
     for name in SHIPPED:
         assert (CHECKPOINTS / f"{name}.toml").is_file() and (CHECKPOINTS / f"{name}.md").is_file()
+        assert (CHECKPOINTS / f"{name}.npz").stat().st_size < 4 * 2**20
         assert (CHECKPOINTS / f"{name}.pt").stat().st_size < 20 * 2**20
 
 
 @pytest.mark.parametrize("name", SHIPPED)
 def test_checkpoint_loads_weights_only(name):
+    from icrsumo.learn.exact.checkpoint import load
+
     ck = torch.load(CHECKPOINTS / f"{name}.pt", weights_only=True)
     assert ck["format"] == "icrsumo-agent/1" and ck["meta"]["steps"] > 0
+    exact = load(CHECKPOINTS / f"{name}.npz")
+    assert exact.meta["source"] == f"{name}.pt" and exact.meta["source_meta"]["steps"] == ck["meta"]["steps"]
 
 
 @pytest.mark.parametrize("name", SHIPPED)
@@ -85,4 +92,4 @@ def test_a_shipped_agent_loads_the_shipped_checkpoint_whatever_the_cwd(tmp_path,
     monkeypatch.chdir(tmp_path)
     for name in SHIPPED:
         cls = BUILTIN[name]
-        assert checkpoint_path(cls.checkpoint) == CHECKPOINTS / f"{name}.pt"
+        assert checkpoint_path(cls.checkpoint) == CHECKPOINTS / f"{name}.npz"

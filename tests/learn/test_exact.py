@@ -198,3 +198,38 @@ print(json.dumps(out["waypoints"].tolist()))
     assert r.returncode == 0, r.stderr
     want = ExactPolicy(path)(bev[:3], texts[:3], speed[:3], stopped[:3])["waypoints"]
     assert np.array_equal(np.array(json.loads(r.stdout), np.float32), want)
+
+
+def test_every_shipped_agent_is_exact_on_recorded_observations(converted):
+    """The shipped checkpoints' fast path equals the int64 reference on frames recorded on the
+    tiny suite (tools/exact_proof.py runs the same on 10,000 frames per checkpoint)."""
+    from icrsumo.learn.agent import CHECKPOINTS
+    from icrsumo.learn.exact.proof import prove, record
+    from icrsumo.scenario import find_scenarios
+
+    frames = record(find_scenarios(converted["tiny"])[:3], 256, every=3)
+    assert len(frames) == 256 and len(set(frames.texts)) >= 2
+    shipped = sorted(CHECKPOINTS.glob("*.npz"))
+    assert sorted(p.stem for p in shipped) == ["bev-minilm", "bev-minilm-aug", "bev-ngram", "bev-ngram-aug",
+                                         "bev-token"]
+    for path in shipped:
+        r = prove(path, frames, variants=((1, 1), (2, 32)))
+        assert r.exact, (path.name, r.first)
+
+
+def test_shipped_agents_drive_without_torch():
+    code = """
+import sys, numpy as np
+sys.modules["torch"] = None; sys.modules["onnxruntime"] = None
+from icrsumo.agents.base import EpisodeInfo, Observation
+from icrsumo.agents.registry import agent_factory
+for name in ("bev-ngram-aug", "bev-token", "bev-minilm-aug"):
+    a = agent_factory(name)()
+    obs = Observation(t=0.0, bev=np.zeros((7, 128, 128), np.uint8), speed=3.0,
+                      instruction="Turn left at the next intersection.", instruction_id=0, notice="")
+    act = a.act(obs)
+    assert act.waypoints.shape == (8, 2), act
+print("ok")
+"""
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=180)
+    assert r.returncode == 0 and r.stdout.strip() == "ok", r.stderr[-2000:]

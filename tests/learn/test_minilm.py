@@ -1,5 +1,6 @@
-"""bev-minilm's pretrained sentence encoder: what ships, what it computes, and the one-line
-errors for a missing or damaged file or a missing tokenizer library, before any episode runs."""
+"""bev-minilm's pretrained sentence encoder: what ships, what it computes (exactly: the float64
+fast path equals the int64 reference bit for bit), and the one-line errors for a missing or
+damaged file or a missing tokenizer library, before any episode runs."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import pytest
 from icrsumo.cli import main
 from icrsumo.errors import InputError
 from icrsumo.learn import minilm
-from icrsumo.learn.minilm import DIM, MODEL, TOKENIZER, SentenceEncoder
+from icrsumo.learn.minilm import DIM, MODEL, TOKENIZER, SentenceEncoder, int64_mm
 
 
 def test_the_encoder_ships_with_its_notice_and_licence():
@@ -33,11 +34,19 @@ def test_embeddings_are_normalised_deterministic_and_mean_something():
 
 def test_missing_and_damaged_files_are_one_line_errors(tmp_path):
     with pytest.raises(InputError, match="the sentence encoder's file is missing.*tools/export_minilm.py"):
-        SentenceEncoder(model=tmp_path / "none.onnx")
-    bad = tmp_path / "bad.onnx"
-    bad.write_bytes(b"not a graph")
-    with pytest.raises(InputError, match="bad.onnx: not a readable ONNX graph"):
+        SentenceEncoder(model=tmp_path / "none.npz")
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not an archive")
+    with pytest.raises(InputError, match="bad.npz: not a readable encoder file"):
         SentenceEncoder(model=bad)
+    np.savez(tmp_path / "other.npz", x=np.zeros(3))
+    with pytest.raises(InputError, match="other.npz: __format__: not an icrsumo sentence encoder file"):
+        SentenceEncoder(model=tmp_path / "other.npz")
+    with np.load(MODEL, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files if k != "layers.3.q.q"}
+    np.savez(tmp_path / "partial.npz", **arrays)
+    with pytest.raises(InputError, match="partial.npz: layers.3.q.q: missing"):
+        SentenceEncoder(model=tmp_path / "partial.npz")
     tok = tmp_path / "tokenizer.json"
     tok.write_text("{")
     with pytest.raises(InputError, match="tokenizer.json: not a readable tokenizer"):
@@ -80,14 +89,18 @@ def test_token_states_and_the_last_layer_rebuild_the_embedding():
     assert float(out @ enc.embed(text)) > 0.99
 
 
-def test_an_export_without_the_states_output_is_refused(tmp_path):
-    import onnx
+def test_the_fast_path_equals_the_int64_reference_bit_for_bit():
+    """Every product is a sum of integers below 2**53: float64 BLAS (any blocking, threads, FMA)
+    gives the int64 result exactly, so the embedding is the same on every CPU."""
+    import json
 
-    model = onnx.load(str(MODEL))
-    kept = [o for o in model.graph.output if o.name != "states"]
-    del model.graph.output[:]
-    model.graph.output.extend(kept)
-    old = tmp_path / "old.onnx"
-    onnx.save(model, str(old))
-    with pytest.raises(InputError, match="old.onnx: the graph has no output 'states' .*export_minilm"):
-        SentenceEncoder(model=old)
+    from icrsumo.learn.augment import TRAIN_BANK
+
+    bank = json.loads(TRAIN_BANK.read_text())
+    texts = sorted({t.replace("[x]", "120") for ts in bank["types"].values() for t in ts})[::6]
+    texts += ["", "tuRn lft at teh nxt intrsection pls", "word " * 400]
+    fast, ref = SentenceEncoder(), SentenceEncoder(mm=int64_mm)
+    assert len(texts) >= 20
+    for t in texts:
+        assert np.array_equal(fast.embed(t), ref.embed(t)), t
+    assert np.array_equal(fast.states(texts[0]), ref.states(texts[0]))

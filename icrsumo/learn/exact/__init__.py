@@ -12,5 +12,8 @@ function is evaluated at run time (the GRU's sigmoid and tanh are tables made by
 * :mod:`.model`: :class:`ExactPolicy`, the fast path (float32 BLAS, batched);
 * :mod:`.reference`: the int64 matrix product (order-free) that proves the fast path;
 * :mod:`.checkpoint`: the file format (npz + JSON, loaded with ``allow_pickle=False``);
-* :mod:`.quantize`: ``icrsumo export-exact``, a float checkpoint made exact (needs torch).
+* :mod:`.quantize`: ``icrsumo export-exact``, a float checkpoint made exact (needs torch);
+* :mod:`.proof`: the fast path against the reference on recorded observations.
+
+The sentence encoder of the MiniLM agents is exact too (:mod:`icrsumo.learn.minilm`).
 """

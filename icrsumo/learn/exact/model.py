@@ -16,6 +16,15 @@ from .graph import PRODUCTS, LangState, fuse, language
 LANG_CACHE = 4096
 
 
+def limit_blas_threads(threads: int) -> None:
+    """Let numpy's BLAS use at most ``threads`` threads in this process (the results are the
+    same with any number; one thread per worker keeps parallel episodes from oversubscribing
+    the cores, as ONNX Runtime's one-thread sessions did)."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=max(int(threads), 1), user_api="blas")
+
+
 class FloatEngine:
     """``mm(x, layer)`` = ``x @ W + b`` in float32 (the weights converted once)."""
 
@@ -35,12 +44,15 @@ class ExactPolicy:
     A call takes ``bev`` (B, 7, H, W) uint8 0/255, instruction ``texts`` (B), ``speed`` (m/s)
     and ``stopped`` (s) (B,) and returns ``waypoints`` (B, K, 2) m, ``speed`` (B,) m/s,
     ``stop`` (B,) bool and ``stop_logit`` (B,). ``engine`` replaces the float32 products (the
-    int64 reference: :func:`icrsumo.learn.exact.reference.int64_engine`)."""
+    int64 reference: :func:`icrsumo.learn.exact.reference.int64_engine`); ``threads`` limits
+    numpy's BLAS threads in the process (:func:`limit_blas_threads`; None leaves them)."""
 
     runtime = "exact"
     device = "cpu"
 
-    def __init__(self, path: Path | str | ExactCheckpoint, engine=None) -> None:
+    def __init__(self, path: Path | str | ExactCheckpoint, engine=None, threads: int | None = 1) -> None:
+        if threads:
+            limit_blas_threads(threads)
         ck = path if isinstance(path, ExactCheckpoint) else load(path)
         self.checkpoint = ck
         self.cfg, self.meta, self.arrays = ck.config, ck.meta, ck.arrays
