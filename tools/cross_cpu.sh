@@ -2,7 +2,10 @@
 # Run the same evaluation on another machine's CPU (the lent GPU machine: Python, no SUMO, no
 # network) with the same packages as here, and compare episode by episode (docs/exact.md).
 #
-# Here (the project's venv active, from the repository root):
+# Here (the project's venv active, from the repository root; DIR inside the checkout and ignored,
+# e.g. .devpack listed in .git/info/exclude, so that each call can carry one chunk; the float
+# checkpoints icrsumo/learn/checkpoints/*.pt are not needed there: move them out of the tree
+# during the calls, or tree and chunk exceed one transfer):
 #   bash tools/cross_cpu.sh bundle DIR [PYVER]   # libsumo, its client libraries, and numpy,
 #       # OpenCV, tokenizers and the pure-Python wheels at this venv's versions for PYVER (default
 #       # 3.12), as DIR/cNN/chunk.NN of 24 MB (each fits one transfer with the checkout)
@@ -13,8 +16,8 @@
 #   source <(bash tools/cross_cpu.sh env)
 #   bash tools/cross_cpu.sh run DIR/runs/NAME RESULTS [evaluate options...]
 # "run" evaluates a copy of the folder with 16 workers and writes RESULTS/NAME.hashes (one line
-# per episode: key and the SHA-256 of its log) and RESULTS/NAME.summary.json; compare with
-#   python -c "..." (docs/exact.md) or icrsumo digest.
+# per episode: key and the SHA-256 of its log) and RESULTS/NAME.summary.json, and prints the
+# run's digest: the same digest as the run here means every episode is the same.
 set -euo pipefail
 cmd=${1:?bundle | copy | stage | install | env | run}
 case "$cmd" in
