@@ -46,3 +46,20 @@ def test_check_agent_bad_input_is_exit_2(cache, capsys, spec, expect):
     assert main(["check-agent", spec]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and expect in err[0] and "Traceback" not in err[0]
+
+
+def test_check_agent_says_whether_an_agent_is_cpu_independent(cache, capsys, tmp_path):
+    """One line: an exact checkpoint proven against its int64 reference on the run's
+    observations, a float checkpoint not CPU-independent, other agents not checked."""
+    from icrsumo.learn.agent import CHECKPOINTS
+
+    assert main(["check-agent", "bev-ngram-aug", "--decisions", "20"]) == 0
+    out = capsys.readouterr().out
+    assert "CPU-independent: exact checkpoint, its fast path equals the int64 reference bit for bit" in out
+    floats = tmp_path / "float_agent.py"
+    floats.write_text("from icrsumo.learn.agent import LearnedAgent\n\n\nclass Float(LearnedAgent):\n"
+                      f"    name = 'float'\n    checkpoint = {str(CHECKPOINTS / 'bev-ngram-aug.pt')!r}\n")
+    assert main(["check-agent", f"{floats}:Float", "--decisions", "20"]) == 0
+    assert "not CPU-independent: a float checkpoint's actions depend on the CPU" in capsys.readouterr().out
+    assert main(["check-agent", f"{AGENTS}:Cruise", "--decisions", "20"]) == 0
+    assert "CPU independence not checked" in capsys.readouterr().out
