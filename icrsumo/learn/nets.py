@@ -196,16 +196,28 @@ class BevLanguageNet(nn.Module):
         return self.fuse(bev, self.lang(ids), speed, stopped)
 
     def fuse(self, bev: torch.Tensor, lang: torch.Tensor, speed: torch.Tensor,
-             stopped: torch.Tensor) -> dict[str, torch.Tensor]:
-        """The forward pass from an already encoded language vector ``lang`` (B, lang)."""
+             stopped: torch.Tensor, taps: list | None = None) -> dict[str, torch.Tensor]:
+        """The forward pass from an already encoded language vector ``lang`` (B, lang);
+        ``taps``, when given, receives the seven ReLU activations an exact export calibrates on
+        (after the stem, c2, the FiLM, c4, fc and the two MLP layers)."""
+        keep = taps.append if taps is not None else (lambda t: None)
         x = F.relu(self.stem(bev))
+        keep(x)
         x = F.relu(self.c2(x))
+        keep(x)
         x = self.c3(x)
         gamma, beta = self.film(lang).chunk(2, dim=1)
         x = F.relu(x * (1 + gamma[:, :, None, None]) + beta[:, :, None, None])
+        keep(x)
         x = F.relu(self.c4(x))
+        keep(x)
         x = F.relu(self.fc(x.flatten(1)))
-        h = self.mlp(torch.cat([x, lang, (speed / 10.0)[:, None], (stopped / 5.0)[:, None]], dim=1))
+        keep(x)
+        h = self.mlp[1](self.mlp[0](torch.cat([x, lang, (speed / 10.0)[:, None], (stopped / 5.0)[:, None]],
+                                              dim=1)))
+        keep(h)
+        h = self.mlp[3](self.mlp[2](h))
+        keep(h)
         out = self.head(h)
         k = len(ARC_M)
         wps = out[:, : 2 * k].view(-1, k, 2)

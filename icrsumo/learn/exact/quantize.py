@@ -157,18 +157,9 @@ def export_exact(checkpoint: Path, frames, extra_texts: list[str] = (), percenti
             lang = torch.from_numpy(lang_f[[row[t] for t in texts[i:i + 256]]])
             sp = torch.from_numpy(speed[i:i + 256]).double()
             st = torch.from_numpy(stopped[i:i + 256]).double()
-            n = net.double()
-            x1 = torch.relu(n.stem(x))
-            x2 = torch.relu(n.c2(x1))
-            x3 = n.c3(x2)
-            gamma, beta = n.film(lang).chunk(2, dim=1)
-            y = torch.relu(x3 * (1 + gamma[:, :, None, None]) + beta[:, :, None, None])
-            x4 = torch.relu(n.c4(y))
-            x5 = torch.relu(n.fc(x4.flatten(1)))
-            h0 = torch.cat([x5, lang, (sp / 10.0)[:, None], (st / 5.0)[:, None]], dim=1)
-            x6 = torch.relu(n.mlp[0](h0))
-            x7 = torch.relu(n.mlp[2](x6))
-            for key, v in zip(acts, (x1, x2, y, x4, x5, x6, x7)):
+            taps: list = []
+            net.double().fuse(x, lang, sp, st, taps=taps)
+            for key, v in zip(acts, taps):
                 acts[key].append(v.numpy().reshape(-1)[:: max(1, v[0].numel() // 4096)])
         net.float()
     r = {k: _range(np.concatenate(v), percentile) for k, v in acts.items()}
