@@ -170,7 +170,7 @@ def _suite_id(suite: str) -> str:
     return suite if suite in bundled_suites() else (Path(suite).name or suite)
 
 
-def _check_summary(out: Path, store: ResultStore, digest: str, scoring: str) -> str:
+def _check_summary(out: Path, hashes: Sequence[EpisodeHash], digest: str, scoring: str) -> str:
     """What ``OUT/summary.json``'s digest says against the store's: "" when it agrees, else one
     line (no summary, no digest in it, another digest)."""
     from .fsio import read_json
@@ -191,7 +191,7 @@ def _check_summary(out: Path, store: ResultStore, digest: str, scoring: str) -> 
     rescored = doc.get("scoring")
     if rescored != scoring and isinstance(rescored, str) and rescored in SCORINGS:
         # a report rescored by other rules (icrsumo report OUT --scoring NAME): a digest of those rules
-        if digest_of(store_hashes(store), rescored) == stored:
+        if digest_of(hashes, rescored) == stored:
             return ""
         return (f"{path}: digest {stored} (of the scoring {rescored} it was rescored by) is not the "
                 f"store's: the store changed after it was written (icrsumo report {out} rewrites it)")
@@ -225,7 +225,7 @@ def folder_digest(out: str | Path) -> FolderDigest:
     with ResultStore(out / "results.sqlite") as store:
         hashes = tuple(store_hashes(store))
         digest = digest_of(hashes, scoring)
-        note = _check_summary(out, store, digest, scoring)
+    note = _check_summary(out, hashes, digest, scoring)
     return FolderDigest(out, digest, scoring, _suite_id(cfg["suite"]), hashes, note)
 
 

@@ -415,9 +415,9 @@ class BevRenderer:
         if vehicles is not None and len(vehicles):
             veh = np.asarray(vehicles, dtype=np.float64).reshape(-1, 5)
             d2 = (veh[:, 0] - ex) ** 2 + (veh[:, 1] - ey) ** 2
-            # libm's hypot, cos and sin one value at a time, not numpy's SIMD loops (which may
-            # round differently on another CPU): the raster must not depend on the machine
-            half = np.array([math.hypot(vl, vw) for vl, vw in veh[:, 3:5].tolist()]).reshape(-1) * 0.5
+            # Python's math (libm's cos and sin, CPython's own hypot) one value at a time, not
+            # numpy's SIMD loops, which may round differently on another CPU
+            half = np.array([math.hypot(vl, vw) for vl, vw in veh[:, 3:5].tolist()]) * 0.5
             veh = veh[d2 <= (reach + half) ** 2]
             if len(veh):
                 yaws = veh[:, 2].tolist()

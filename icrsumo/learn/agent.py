@@ -55,6 +55,19 @@ def is_exact(path: str | Path) -> bool:
     return Path(path).suffix == ".npz"
 
 
+def read_checkpoint(path: Path) -> None:
+    """Read and check a checkpoint of either kind (exact ``.npz`` without torch, float ``.pt``
+    with it): the InputErrors loading it would raise, before anything runs."""
+    if is_exact(path):
+        from .exact.checkpoint import load
+
+        load(path)
+    else:
+        from .nets import read_checkpoint as read_float
+
+        read_float(path)
+
+
 def checkpoint_path(checkpoint: str | Path) -> Path:
     """The file of a checkpoint given as a path or as a shipped checkpoint's file name
     (``bev-token.pt``); an InputError when there is no such file. Its content is checked when
@@ -170,12 +183,7 @@ class MinilmAgent(LearnedAgent):
         need the encoder have it, so the other learned agents add nothing to start-up."""
         from .minilm import encoder
 
-        path = checkpoint_path(cls.checkpoint)
-        if is_exact(path):
-            from .exact.checkpoint import load
-        else:
-            from .nets import read_checkpoint as load
-        load(path)
+        read_checkpoint(checkpoint_path(cls.checkpoint))
         encoder()
 
 

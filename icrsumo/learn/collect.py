@@ -107,7 +107,7 @@ class CollectOptions:
         """A ``driver`` that is a registered non-privileged agent, or a checkpoint whose file
         loads and fits its model (checked here, before anything is written or driven)."""
         from ..agents.registry import BUILTIN
-        from .agent import checkpoint_path
+        from .agent import checkpoint_path, read_checkpoint
 
         cls = BUILTIN.get(self.driver)
         if cls is not None:
@@ -116,12 +116,7 @@ class CollectOptions:
                                  "simulator's state, which a driver does not see)",
                                  "give a learned agent or a checkpoint")
             return
-        path = checkpoint_path(self.driver)
-        if path.suffix == ".npz":
-            from .exact.checkpoint import load as read_checkpoint
-        else:
-            from .nets import read_checkpoint
-        read_checkpoint(path)
+        read_checkpoint(checkpoint_path(self.driver))
 
 
 def _is_eval_file(suite: str) -> bool:

@@ -144,18 +144,20 @@ class SentenceEncoder:
         self.tokenizer.no_padding()
         self.tokenizer.enable_truncation(MAX_TOKENS)
         self.model, self.a, self.mm = Path(model), _read(Path(model)), mm
-        # the products' weights as float64 integers (q - zero point), converted once
-        self.w = {}
+        # each product's weights as float64 integers (q - zero point), scales and bias, converted once
+        self.w, self.scale, self.bias = {}, {}, {}
         for i in range(LAYERS):
             for part in _PARTS:
                 p = f"layers.{i}.{part}"
                 w = self.a[f"{p}.q"].astype(np.int16) - self.a[f"{p}.zero"]
-                self.w[f"{p}.w"] = w.astype(np.float64)
+                self.w[p] = w.astype(np.float64)
+                self.scale[p] = self.a[f"{p}.scale"].astype(np.float64)
+                self.bias[p] = self.a[f"{p}.b"].astype(np.float64)
 
     def _linear(self, x: np.ndarray, name: str) -> np.ndarray:
         xq, s = _q16(x)
-        acc = self.mm(xq, self.w[f"{name}.w"])
-        return acc * (s * self.a[f"{name}.scale"].astype(np.float64)) + self.a[f"{name}.b"].astype(np.float64)
+        acc = self.mm(xq, self.w[name])
+        return acc * (s * self.scale[name]) + self.bias[name]
 
     def _layer(self, x: np.ndarray, i: int) -> np.ndarray:
         p, a = f"layers.{i}.", self.a
@@ -197,7 +199,7 @@ class SentenceEncoder:
         dict, its 8-bit weights dequantised per output channel: where fine-tuning starts."""
         p, out = f"layers.{LAYERS - 1}.", {}
         for part in _PARTS:
-            out[f"{part}_w"] = (self.w[f"{p}{part}.w"] * self.a[f"{p}{part}.scale"]).astype(np.float32)
+            out[f"{part}_w"] = (self.w[p + part] * self.a[f"{p}{part}.scale"]).astype(np.float32)
             out[f"{part}_b"] = self.a[f"{p}{part}.b"].astype(np.float32)
         for ln in ("ln1", "ln2"):
             out[f"{ln}_w"] = self.a[f"{p}{ln}.w"].astype(np.float32)

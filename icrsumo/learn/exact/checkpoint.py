@@ -11,6 +11,7 @@ fails is an :class:`icrsumo.errors.InputError` naming it and the array.
 
 from __future__ import annotations
 
+import io
 import json
 import zipfile
 from dataclasses import dataclass
@@ -137,8 +138,6 @@ def save(ck: ExactCheckpoint, path: Path) -> None:
     doc = {"format": FORMAT, "config": config_dict(ck.config), "meta": ck.meta}
     arrays = {"__doc__": np.frombuffer(json.dumps(doc, sort_keys=True).encode("utf-8"), np.uint8),
               **ck.arrays}
-    import io
-
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     write_atomic(Path(path), buf.getvalue())

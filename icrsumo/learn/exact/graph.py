@@ -190,8 +190,8 @@ def language(a: Mapping[str, np.ndarray], encoder: str, ids: np.ndarray) -> Lang
         emb = _i64(a["lang.emb"])
         xs = [emb[i] for i in ids[:n]]
         hf, hr = _gru(a, "f", xs), _gru(a, "r", xs[::-1])
-        real = np.concatenate([hf, hr]).astype(np.float32)
-        lang_q = np.clip(np.rint(np.multiply(real, a["lang.out_m"], dtype=np.float32)), -LMAX, LMAX
+        hq = np.concatenate([hf, hr]).astype(np.float32)  # both directions, 2**-HIDDEN_BITS units
+        lang_q = np.clip(np.rint(np.multiply(hq, a["lang.out_m"], dtype=np.float32)), -LMAX, LMAX
                          ).astype(np.int64)
     elif encoder == "minilm":
         x = np.multiply(np.asarray(ids, np.float32), a["lang.in_m"], dtype=np.float32)

@@ -47,9 +47,6 @@ class ExactPolicy:
     int64 reference: :func:`icrsumo.learn.exact.reference.int64_engine`); ``threads`` limits
     numpy's BLAS threads in the process (:func:`limit_blas_threads`; None leaves them)."""
 
-    runtime = "exact"
-    device = "cpu"
-
     def __init__(self, path: Path | str | ExactCheckpoint, engine=None, threads: int | None = 1) -> None:
         if threads:
             limit_blas_threads(threads)

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .checkpoint import ExactCheckpoint, load
 from .model import ExactPolicy, limit_blas_threads
 from .reference import int64_engine
 
@@ -98,12 +99,13 @@ def prove(checkpoint, frames: Frames, variants=VARIANTS) -> ProofResult:
     """Compare the fast path of ``checkpoint`` (a path or an :class:`ExactCheckpoint`) with the
     int64 reference on every frame."""
     t0 = time.perf_counter()
-    want = _run(ExactPolicy(checkpoint, engine=int64_engine, threads=None), frames, 64)
+    ck = checkpoint if isinstance(checkpoint, ExactCheckpoint) else load(checkpoint)
+    want = _run(ExactPolicy(ck, engine=int64_engine, threads=None), frames, 64)
     bad = np.zeros(len(frames), bool)
     first = ""
     for threads, batch in variants:
         limit_blas_threads(threads)
-        got = _run(ExactPolicy(checkpoint, threads=None), frames, batch)
+        got = _run(ExactPolicy(ck, threads=None), frames, batch)
         for key, ref in want.items():
             same = got[key] == ref
             diff = ~same.reshape(len(frames), -1).all(axis=1) | (got[key].dtype != ref.dtype)

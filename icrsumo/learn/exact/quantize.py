@@ -20,11 +20,13 @@ import numpy as np
 
 from ...errors import InputError
 from ..labels import ARC_M
-from .checkpoint import SUFFIX, ExactCheckpoint, bounds, check_arrays, save
+from .checkpoint import SUFFIX, ExactCheckpoint, bounds, check_arrays, layout, save
 from .graph import EXACT_LIMIT, HIDDEN_BITS, LMAX, SMAX, TABLE_HALF, TABLE_STEP, UMAX
 
-#: the float model's parameters the exact graph covers (others: the training-only intent head)
-_UNUSED = ("intent.weight", "intent.bias")
+
+class _NotExact(Exception):
+    """A layer that cannot be made exact: ``args`` = (its name, why); :func:`export_exact`
+    names the checkpoint."""
 
 
 def _per_channel(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -35,13 +37,12 @@ def _per_channel(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.clip(np.rint(w / scale[:, None]), -SMAX, SMAX).astype(np.int8).T.copy(), scale
 
 
-def _bias(b: np.ndarray, unit: np.ndarray, name: str = "") -> np.ndarray:
-    """A float bias in accumulator units ``unit`` (per channel) as int32; an InputError when it
-    cannot be carried exactly (2**24 or more)."""
+def _bias(b: np.ndarray, unit: np.ndarray, name: str) -> np.ndarray:
+    """A float bias in accumulator units ``unit`` (per channel) as int32 (it must stay below
+    2**24 to be carried exactly)."""
     v = np.rint(np.asarray(b, np.float64) / unit)
     if not np.all(np.abs(v) < EXACT_LIMIT):
-        raise InputError("checkpoint", name, "cannot be made exact: its bias is 2**24 or more "
-                         "accumulator units", "retrain with weight decay")
+        raise _NotExact(name, "its bias is 2**24 or more accumulator units")
     return v.astype(np.int32)
 
 
@@ -74,17 +75,16 @@ def _range(values: np.ndarray, percentile: float) -> float:
     return hi if hi > 0 else 1.0
 
 
-def _top(path: Path, name: str, w: np.ndarray, b: np.ndarray, rng: float) -> int:
+def _top(name: str, w: np.ndarray, b: np.ndarray, rng: float) -> int:
     """The largest input top (at most UMAX) for which product ``name`` (float weights ``w``
-    (out, in), bias ``b``, input range ``rng``) stays below 2**24; an InputError below 15."""
+    (out, in), bias ``b``, input range ``rng``) stays below 2**24 (at least 15)."""
     wq, sw = _per_channel(w)
     l1 = np.abs(wq.astype(np.int64)).sum(0)
     for top in range(UMAX, 14, -1):
         bq = np.abs(np.rint(np.asarray(b, np.float64) / (rng / top * sw)))
         if float((top * l1 + bq).max()) < EXACT_LIMIT:
             return top
-    raise InputError(path, name, "cannot be made exact: even 4-bit activations let its partial sums reach "
-                     "2**24 (weights too wide)", "retrain with weight decay, or a narrower layer")
+    raise _NotExact(name, "even 4-bit activations let its partial sums reach 2**24 (weights too wide)")
 
 
 def calibration_frames(folders: list[Path], limit: int = 4000, seed: int = 0):
@@ -127,15 +127,33 @@ def augmented_texts(folders: list[Path], variants: int = 8, seed: int = 0) -> li
 def export_exact(checkpoint: Path, frames, extra_texts: list[str] = (), percentile: float = 99.99,
                  meta: dict | None = None) -> ExactCheckpoint:
     """The exact checkpoint of float ``checkpoint``, calibrated on ``frames`` (as
-    :func:`calibration_frames` returns) and the language side also on ``extra_texts``."""
-    import torch
-
+    :func:`calibration_frames` returns) and the language side also on ``extra_texts``. A
+    checkpoint that cannot be made exact is an InputError naming it and the layer."""
     from .. import nets
 
     ck, cfg = nets.read_checkpoint(Path(checkpoint))
     if cfg.encoder not in ("ngram", "token", "minilm"):
         raise InputError(checkpoint, "config.encoder", f"encoder {cfg.encoder!r} has no exact form (its "
                          "fine-tuned transformer layer)", "export a token, ngram or minilm checkpoint")
+    try:
+        a = _quantize(ck, cfg, frames, extra_texts, percentile)
+    except _NotExact as err:
+        raise InputError(checkpoint, err.args[0], f"cannot be made exact: {err.args[1]}",
+                         "retrain with weight decay, or a narrower layer") from None
+    bev, texts = frames[0], frames[1]
+    info = {"source": Path(checkpoint).name, "source_meta": ck.get("meta", {}), "percentile": percentile,
+            "calibration_frames": len(bev), "calibration_texts": len(dict.fromkeys([*texts, *extra_texts])),
+            "bounds": bounds(a), **(meta or {})}
+    check_arrays(a, cfg, checkpoint)
+    return ExactCheckpoint(config=cfg, arrays=a, meta=json.loads(json.dumps(info, default=str)))
+
+
+def _quantize(ck: dict, cfg, frames, extra_texts, percentile: float) -> dict[str, np.ndarray]:
+    """The arrays of :func:`icrsumo.learn.exact.checkpoint.layout` for float checkpoint ``ck``."""
+    import torch
+
+    from .. import nets
+
     state = {k: v.detach().double().numpy() for k, v in ck["model"].items()}
     net = nets.BevLanguageNet(cfg)
     net.load_state_dict(ck["model"])
@@ -178,7 +196,7 @@ def export_exact(checkpoint: Path, frames, extra_texts: list[str] = (), percenti
     # the scale of each product's input: the activation's range over the top the product allows
     s_in = {"stem": 1.0 / 255.0}
     for name, key in zip(list(layers)[1:], r):
-        a[f"{name}.top"] = np.array(_top(checkpoint, name, *layers[name], r[key]), np.int32)
+        a[f"{name}.top"] = np.array(_top(name, *layers[name], r[key]), np.int32)
         s_in[name] = r[key] / int(a[f"{name}.top"])
     nxt = dict(zip(layers, [*list(layers)[1:], None]))
     for name in ("stem", "c2", "c4", "fc", "mlp1"):
@@ -194,20 +212,13 @@ def export_exact(checkpoint: Path, frames, extra_texts: list[str] = (), percenti
     a["mlp0.m"] = np.full(hid, 1.0 / s_in["mlp1"], np.float32)
     a["head.d"] = _dense(a, "head", *layers["head"], s_in["head"], None).astype(np.float32)
     a["arc"] = np.asarray(ARC_M, np.float32)
-    for k in list(a):
-        if a[k].dtype == np.float64 and not k.endswith((".k", ".kl", ".bias", ".inv", ".kih", ".khh", ".bih",
-                                                         ".bhh", ".sigmoid", ".tanh")):
-            a[k] = a[k].astype(np.float32)
+    dtypes = {k: dtype for k, (_, dtype) in layout(cfg).items()}
+    a = {k: v.astype(dtypes[k]) for k, v in a.items()}
     for name, bound in bounds(a).items():
         if bound >= EXACT_LIMIT:
-            raise InputError(checkpoint, name, f"cannot be made exact: its partial sums can reach {bound} "
-                             ">= 2**24 (weights too wide for 8-bit activations)",
-                             "retrain with weight decay, or a narrower layer")
-    info = {"source": Path(checkpoint).name, "source_meta": ck.get("meta", {}), "percentile": percentile,
-            "calibration_frames": len(bev), "calibration_texts": len(all_texts),
-            "bounds": bounds(a), **(meta or {})}
-    check_arrays(a, cfg, checkpoint)
-    return ExactCheckpoint(config=cfg, arrays=a, meta=json.loads(json.dumps(info, default=str)))
+            raise _NotExact(name, f"its partial sums can reach {bound} >= 2**24 (weights too wide for "
+                            "8-bit activations)")
+    return a
 
 
 def _language(a: dict, cfg, state: dict, net, ids, s_l: float, percentile: float) -> None:
@@ -249,8 +260,8 @@ def _language(a: dict, cfg, state: dict, net, ids, s_l: float, percentile: float
         h1 = torch.relu(lang.mlp[0](x))
         r_h1 = _range(h1.numpy(), percentile)
         net.float()
-    a["lang.l2.top"] = np.array(_top(Path("checkpoint"), "lang.l2", state["lang.mlp.2.weight"],
-                                     state["lang.mlp.2.bias"], r_h1), np.int32)
+    a["lang.l2.top"] = np.array(_top("lang.l2", state["lang.mlp.2.weight"], state["lang.mlp.2.bias"], r_h1),
+                                np.int32)
     s_h1 = r_h1 / int(a["lang.l2.top"])
     _dense(a, "lang.l1", state["lang.mlp.0.weight"], state["lang.mlp.0.bias"], s_in, s_h1)
     _dense(a, "lang.l2", state["lang.mlp.2.weight"], state["lang.mlp.2.bias"], s_h1, s_l)
