@@ -43,7 +43,7 @@ from .evaluation.run import (
     run_queue,
     with_factories,
 )
-from .fsio import FolderLock, dumps_json, read_json, write_atomic
+from .fsio import FolderLock, bounded_name, dumps_json, read_json, write_atomic
 from .instructions.banks import load_banks
 from .instructions.rewrites import rewrite_pool
 from .instructions.store import read_route_file, route_document
@@ -163,6 +163,11 @@ def _rewritten(ins: Instruction, pools: dict, choice: dict[int, int]) -> Instruc
     )
 
 
+def agent_folder(name: str) -> str:
+    """The folder name of an agent's searched instruction files (bounded in length)."""
+    return bounded_name(safe_name(name), name)
+
+
 def _agent_id(name: str) -> int:
     return zlib.crc32(name.encode("utf-8")) & 0x7FFFFFFF
 
@@ -192,7 +197,7 @@ def _attack_locked(opts: AttackOptions, eopts: EvalOptions, factories: dict, gua
     check_agents(out / "results.sqlite", ids, opts.replace_agents)
     factories = bind_agents(factories, out)
     bound_guards = bind_guards(guards, out)
-    prep = prepare_suite(eopts, ids.config())
+    prep = prepare_suite(eopts, ids.config(), {"run": "attack", "constraint": opts.constraint})
     for line in prep.skipped:
         print(f"icrsumo: skipped: {line}", file=sys.stderr)
     jobs = with_factories([
@@ -242,7 +247,7 @@ def _attack_locked(opts: AttackOptions, eopts: EvalOptions, factories: dict, gua
                 batch = []
                 for s in searches:
                     s.sets.append(s.propose(q))
-                    path = folder / safe_name(s.agent) / f"{safe_name(s.route)}.json"
+                    path = folder / agent_folder(s.agent) / f"{safe_name(s.route)}.json"
                     _write_sets(path, s, [])
                     batch.append(replace(s.job, family=Family.ATTACK.value, k=q, instructions=str(path)))
                 have = store.keys()
@@ -294,7 +299,7 @@ def _transfer(
     for s in searches:
         q, _ = _worst(s)
         worst = replace(s.sets[q - 1], family=Family.TRANSFER, k=_agent_id(s.agent))
-        path = folder / "transfer" / safe_name(s.agent) / f"{safe_name(s.route)}.json"
+        path = folder / "transfer" / agent_folder(s.agent) / f"{safe_name(s.route)}.json"
         write_atomic(
             path,
             dumps_json(
@@ -336,7 +341,7 @@ def _grid(compare: Path | None, agent: str) -> dict | None:
         return None
     summary = read_json(Path(compare) / "summary.json", "evaluation summary", "run icrsumo report on it")
     fams = summary.get("agents", {}).get(agent, {}).get("families", {})
-    with ResultStore(Path(compare) / "results.sqlite") as store:
+    with ResultStore(Path(compare) / "results.sqlite", readonly=True) as store:
         recs = [r for r in store.records() if r.agent == agent]
     done = {r.route_id for r in recs if r.family == Family.BASELINE and r.termination_class == "done"}
     broken = sorted(

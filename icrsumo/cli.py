@@ -14,7 +14,7 @@ from typing import NoReturn
 
 from . import __version__
 from .defaults import DEFAULT_AGENT, DEFAULT_SUITE
-from .errors import InputError, check_key_env
+from .errors import InputError, check_key_env, visible
 from .metrics import DEFAULT_SCORING, scoring_names
 from .resources import bundled_suites
 from .vocab import ALL_FAMILIES, CONTROL_FAMILIES, FAMILIES, Family
@@ -22,19 +22,13 @@ from .vocab import ALL_FAMILIES, CONTROL_FAMILIES, FAMILIES, Family
 
 def _cmd_convert_routes(args: argparse.Namespace) -> int:
     from .convert import ConvertOptions, convert_routes
-    from .resources import bundled_suites, suite_coords
+    from .resources import suite_coords
+    from .routes import suite_file
 
-    routes = Path(args.routes)
-    coords = args.coords
-    if not routes.exists() and args.routes in bundled_suites():
-        routes = bundled_suites()[args.routes]
-        coords = coords or suite_coords(args.routes)  # a bundled suite knows its frame
-    elif not routes.exists():
-        raise InputError(args.routes, "", "no such route file or bundled suite",
-                         f"give a route XML file or one of {', '.join(bundled_suites())}")
+    routes = suite_file(args.routes, "routes")
     opts = ConvertOptions(
-        coords=coords or "sumo", traffic=args.traffic, net=args.net, xodr=args.xodr,
-        net_dir=args.net_dir, max_snap=args.max_snap, seed=args.seed, warmup=args.warmup,
+        coords=args.coords or suite_coords(args.routes) or "sumo", traffic=args.traffic, net=args.net,
+        xodr=args.xodr, net_dir=args.net_dir, max_snap=args.max_snap, seed=args.seed, warmup=args.warmup,
         workers=args.workers,
     )
     t0 = time.perf_counter()
@@ -181,11 +175,12 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from .api import evaluate_in_cli_words
 
     t0 = time.perf_counter()
+    routes = _split_list(args.routes, "--routes")
     result = evaluate_in_cli_words(
         suite=args.suite, agents=_agents(args) or None,
         families=_split_list(args.family, "--family") or None,
         k=args.k, seed=args.seed, out=args.out, workers=args.workers, quiet=args.quiet,
-        routes=_split_list(args.routes, "--routes") or None, backend=args.backend, address=args.address,
+        routes=routes or None, backend=args.backend, address=args.address,
         traffic=args.traffic, rollout_route=args.rollout_route, agent_timeout=args.agent_timeout or None,
         batch_inference=args.batch_inference, max_batch=args.max_batch,
         inference_processes=args.inference_processes, baseline_bank=args.baseline_bank,
@@ -195,8 +190,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     )
     again = (" (left out of every table, with their pairs; --retry-crashed runs them again)"
              if result.crashed else "")
-    print(f"{result.done} episodes done, {result.crashed} crashed{again}, {time.perf_counter() - t0:.0f} s "
-          f"-> {args.out}", file=sys.stderr)
+    print(f"{result.ran:,} episodes run now, {result.episodes - result.ran:,} already stored; "
+          f"{result.done:,} episodes done, {result.crashed:,} crashed{again}, "
+          f"{time.perf_counter() - t0:.0f} s -> {args.out}", file=sys.stderr)
     print(_digest_line(result.digest), file=sys.stderr)
     return 1 if args.fail_on_crash and result.crashed else 0
 
@@ -215,10 +211,11 @@ def _cmd_attack(args: argparse.Namespace) -> int:
     from .attack import AttackOptions, attack_table, run_attack
 
     t0 = time.perf_counter()
+    routes = _split_list(args.routes, "--routes")
     agents = _agents(args) or None
     timeout = None if args.agent_timeout == 0 else args.agent_timeout
     opts = AttackOptions(out=Path(args.out), suite=args.suite, seed=args.seed, budget=args.budget,
-                         routes=_split_list(args.routes, "--routes") or None, constraint=args.constraint,
+                         routes=routes or None, constraint=args.constraint,
                          workers=args.workers, traffic=args.traffic, quiet=args.quiet, compare=args.compare,
                          agent_timeout=timeout,
                          replace_agents=_split_list(args.replace_agent, "--replace-agent"),
@@ -236,10 +233,13 @@ def _cmd_show(args: argparse.Namespace) -> int:
     from .agents.registry import DEFAULT_AGENT
     from .show import show_episode
 
+    if args.dir is None and Path(args.out).is_dir() and not os.access(args.out, os.W_OK | os.X_OK):
+        raise InputError(args.out, "", "the folder is not writable, so the video and still cannot go to "
+                         "OUT/show", "pass --dir FOLDER, a folder you can write to")
     res = show_episode(Path(args.out), args.agent or DEFAULT_AGENT, args.route, args.family, args.k,
                        Path(args.dir) if args.dir else None, spec=args.spec)
     r = res.record
-    print(f"{r.route_id} {r.agent} {r.family}:{r.k}  DS {r.ds:.1f}  RC {r.rc:.1f}  IS {r.is_:.3f}  "
+    print(f"{r.route_id} {visible(r.agent)} {r.family}:{r.k}  DS {r.ds:.1f}  RC {r.rc:.1f}  IS {r.is_:.3f}  "
           f"{r.termination} ({r.termination_class})")
     print("the replay reproduces the stored log byte for byte" if res.identical else
           f"the replay does NOT reproduce the stored log: {res.difference}")
@@ -258,13 +258,9 @@ def _cmd_list(args: argparse.Namespace) -> int:
         for name, path in bundled_suites().items():
             print(f"{name:16} {suite_coords(name) or 'sumo':6} {path.name}")
     elif args.what == "routes":
-        from .routes import read_routes
+        from .routes import read_routes, suite_file
 
-        path = bundled_suites().get(args.suite, Path(args.suite))
-        if not path.is_file():
-            raise InputError("--suite", args.suite, "unknown suite",
-                             f"use {', '.join(bundled_suites())} or a route XML file")
-        routes, _ = read_routes(path)
+        routes, _ = read_routes(suite_file(args.suite, "--suite"))
         for r in routes:
             print(f"{r.id:24} {r.town:10} {len(r.waypoints)} waypoints")
     elif args.what == "agents":
@@ -272,18 +268,20 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
         for name in REGISTRY:
             mark = " (default)" if name == DEFAULT_AGENT else ""
-            print(f"{name:22} {REGISTRY.entry(name).description}{mark}")
+            print(f"{visible(name):22} {visible(REGISTRY.entry(name).description)}{mark}")
         for name, dist, why in REGISTRY.skipped_plugins:
-            print(f"icrsumo: note: the agent {name!r} of the plugin {dist} is not registered: {why}",
+            print(f"icrsumo: note: the agent {name!r} of the plugin {visible(dist)} is not registered: "
+                  f"{visible(why)}",
                   file=sys.stderr)
     elif args.what == "guards":
         from .guards.registry import GUARDS
 
         for name in GUARDS:
-            print(f"{name:22} {GUARDS.entry(name).description}")
+            print(f"{visible(name):22} {visible(GUARDS.entry(name).description)}")
         print(f"{'llm:MODEL@URL':22} asks a language model whether the instruction conflicts with the plan")
         for name, dist, why in GUARDS.skipped_plugins:
-            print(f"icrsumo: note: the guard {name!r} of the plugin {dist} is not registered: {why}",
+            print(f"icrsumo: note: the guard {name!r} of the plugin {visible(dist)} is not registered: "
+                  f"{visible(why)}",
                   file=sys.stderr)
     else:
         for fam in ALL_FAMILIES:
@@ -336,7 +334,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
     cfg = read_config(Path(args.config), augment_instructions=True if args.augment_instructions else None,
                       steps=args.steps, device=args.device, seed=args.seed)
-    m = train(cfg, [Path(d) for d in args.data], Path(args.out), encode_workers=args.workers)
+    m = train(cfg, [Path(d) for d in args.data], Path(args.out), quiet=args.quiet,
+              encode_workers=args.workers)
     print(f"step {m.get('step')}: validation {m.get('val', {})} -> {Path(args.out) / 'model.pt'}")
     return 0
 
@@ -477,7 +476,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="built-in name, module:Class, file.py:Class or remote:URL (default: the "
                    f"default agent of evaluate, {DEFAULT_AGENT})")
     e.add_argument("--log", help="write the episode log (JSON) here")
-    e.add_argument("--video", help="write a BEV video with the instruction overlaid (.mp4)")
+    e.add_argument("--video", help="write a BEV video with the instruction overlaid (.webm: VP8, plays in "
+                   "browsers; .mp4: MPEG-4 Part 2; .avi: Motion JPEG)")
     e.set_defaults(func=_cmd_run_episode)
 
     v = sub.add_parser(
@@ -519,8 +519,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="inference processes per agent with --batch-inference, each serving a share "
                    "of the workers (default 1)")
     v.add_argument("--agent-timeout", type=float, default=60.0, metavar="S",
-                   help="seconds an agent's reset/act call may take before the episode is stored as "
-                   "crashed (default 60; 0: no limit)")
+                   help="seconds an agent's reset/act call (or a --guard's reset/check) may take before the "
+                   "episode is stored as crashed (default 60; 0: no limit)")
     v.add_argument("--scoring", choices=scoring_names(), default=DEFAULT_SCORING,
                    help=f"scoring rules (default {DEFAULT_SCORING}: CARLA Leaderboard 1.0's, rule by rule)")
     v.add_argument("--fail-on-crash", action="store_true",
@@ -570,9 +570,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     sh = sub.add_parser(
         "show", help="watch a stored episode: replay it, check it is the same, write its video and a still",
-        description="Re-simulate one stored episode of an evaluate (or attack) folder, check that the replay "
-        "reproduces the stored log byte for byte, and write the BEV video with the active instruction and "
-        "notices, plus a still of the moment it went wrong (its first infraction, else where it ended). "
+        description="Re-simulate one stored episode of an evaluate (or attack) folder, check that the "
+        "replay reproduces the stored log byte for byte, and write the BEV video (WebM: plays in a browser) "
+        "with the active instruction and notices, plus a still of the moment it went wrong (the decision "
+        "where it left its route or its first infraction, whichever came first; else where it ended). "
         "Exit status 0: the replay is the stored episode, 1: it differs, 2: bad input.",
     )
     sh.add_argument("out", help="the --out folder of icrsumo evaluate or attack")
@@ -694,6 +695,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="processes computing a pretrained encoder's embeddings of the training texts "
                    "(encoder minilm; default: number of cores)")
+    t.add_argument("--quiet", action="store_true",
+                   help="no progress on stderr (stages, steps and loss, validation lines)")
     t.set_defaults(func=_cmd_train)
 
     x = sub.add_parser(
@@ -773,17 +776,17 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         # os.replace names its source (our temporary file) first and the destination second
         where = err.filename2 or err.filename or "(a file)"
-        print(f"icrsumo: error: {where}: {err.strerror or err} (fix: check the path: a folder where a file "
-              f"belongs, or the reverse, or its permissions)", file=sys.stderr)
+        print(f"icrsumo: error: {visible(str(where))}: {err.strerror or err} (fix: check the path: a folder "
+              f"where a file belongs, or the reverse, or its permissions)", file=sys.stderr)
         return 2
     except Exception as err:  # the last resort: still one line
         if args.debug:
             raise
         from .errors import describe
 
-        print(f"icrsumo: error: {' '.join(describe(err).split())} (fix: check the files and options "
-              f"named in the command; rerun with --debug for the traceback and report it if the input "
-              f"is right)", file=sys.stderr)
+        print(f"icrsumo: error: {visible(' '.join(describe(err).split()))} (fix: check the files and "
+              f"options named in the command; rerun with --debug for the traceback and report it if the "
+              f"input is right)", file=sys.stderr)
         return 2
     finally:
         for sig, handler in old.items():

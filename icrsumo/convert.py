@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing
 import os
 import re
 import shutil
@@ -29,6 +28,7 @@ from pathlib import Path
 from .errors import InputError, check_seed
 from .fsio import OutFolder, check_out_dir, dumps_json, replace_dir_atomic, sha256_file, write_atomic
 from .networks import convert_xodr, load_net
+from .procs import spawn_context
 from .resources import bundled_towns
 from .routes import read_routes
 from .routing import MatchError, plan_route
@@ -362,7 +362,7 @@ def convert_routes(routes_file: Path, out_dir: Path, opts: ConvertOptions,
     # spawned, not forked: the caller may hold libsumo, torch or Ray threads, which a fork copies
     # in whatever state they are (a forked conversion worker died that way in a full test run)
     with ProcessPoolExecutor(max_workers=min(opts.workers, max(1, len(ok_jobs))),
-                             mp_context=multiprocessing.get_context("spawn")) as pool:
+                             mp_context=spawn_context()) as pool:
         futures = {job[0].id: pool.submit(_convert_one, *job) for job in ok_jobs}
         for rid, fut in futures.items():
             results[rid] = fut.result()

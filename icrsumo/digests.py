@@ -117,7 +117,7 @@ def run_digest(store: ResultStore | str | Path, scoring: str) -> str:
     path = Path(store)
     if not path.is_file():
         raise InputError(path, "", "no results store here", "give the results.sqlite of an evaluation folder")
-    with ResultStore(path) as opened:
+    with ResultStore(path, readonly=True) as opened:
         return digest_of(store_hashes(opened), scoring)
 
 
@@ -222,7 +222,7 @@ def folder_digest(out: str | Path) -> FolderDigest:
     if scoring not in SCORINGS:
         raise InputError(cfg_path, "scoring", f"unknown scoring {short(scoring)}",
                          f"restore it from a copy (known: {', '.join(scoring_names())})")
-    with ResultStore(out / "results.sqlite") as store:
+    with ResultStore(out / "results.sqlite", readonly=True) as store:  # a read-only folder is fine
         hashes = tuple(store_hashes(store))
         digest = digest_of(hashes, scoring)
     note = _check_summary(out, hashes, digest, scoring)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import unicodedata
 
 
 class InputError(Exception):
@@ -31,7 +32,38 @@ class InputError(Exception):
         text = where + self.problem
         if self.fix:
             text += f" (fix: {self.fix})"
-        return " ".join(text.split())
+        return visible(display_url(" ".join(text.split())))
+
+
+#: the password of a URL's user info: ``scheme://user:PASSWORD@`` (up to the authority's last @)
+_URL_PASSWORD = re.compile(r"(?P<head>\b[A-Za-z][A-Za-z0-9+.-]*://[^/\s:@?#]*):[^/\s?#]*@")
+
+
+def display_url(text: str) -> str:
+    """``text`` with the password of every URL in it replaced by ``***``
+    (``http://user:***@host/v1``): how a URL (or a spec or message holding one) is shown or
+    stored; the password itself only ever goes to the URL's own server."""
+    return _URL_PASSWORD.sub(r"\g<head>:***@", text)
+
+
+#: characters a terminal acts on or hides, besides the C0 / C1 controls: bidirectional overrides
+#: and isolates, which reorder what is shown
+_BIDI = frozenset("\u061c\u200e\u200f\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069")
+
+
+def _hidden(c: str) -> bool:
+    return unicodedata.category(c) in ("Cc", "Cs", "Zl", "Zp") or c in _BIDI
+
+
+def visible(text: str) -> str:
+    """``text`` safe for a terminal: every control character (escape sequences such as
+    ``\\x1b[2J`` or a clipboard write ``\\x1b]52;...``, newlines, bidirectional overrides, lone
+    surrogates) written out as Python writes it in a ``repr`` (``\\x1b``, ``\\n``, ``\\u202e``),
+    the rest as it is. How names, instructions and other text from users or servers reach
+    messages and progress lines."""
+    if not any(_hidden(c) for c in text):
+        return text
+    return "".join(repr(c)[1:-1] if _hidden(c) else c for c in text)
 
 
 def short(value: object, limit: int = 40) -> str:
@@ -105,6 +137,20 @@ def check_seed(seed: object, option: str = "--seed") -> int:
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
         raise InputError(option, short(seed), "out of range", "use a whole number from 0 to 2**63 - 1")
     return seed
+
+
+def check_key_text(key: str, var: str, option: str, value: str) -> str:
+    """``key`` (read from the environment variable ``var``) when every character of it is
+    printable ASCII, which is what an HTTP header carries; an InputError naming ``option``,
+    its ``value`` and ``var`` otherwise (the position of the first bad character, never the
+    key)."""
+    bad = next((i for i, c in enumerate(key) if not (c.isascii() and c.isprintable())), None)
+    if bad is not None:
+        raise InputError(option, value, f"the key in {var} holds a character that is not printable ASCII "
+                         f"(character {bad + 1} of {len(key)}), which an HTTP header cannot carry",
+                         f"put a key of printable ASCII characters in {var} (the same on both sides), e.g. "
+                         "the output of: openssl rand -hex 32")
+    return key
 
 
 def check_key_env(name: object, option: str, value: str) -> str:

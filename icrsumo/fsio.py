@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
 import os
@@ -85,14 +86,49 @@ def no_duplicates(pairs: list[tuple[str, Any]]) -> dict:
     return out
 
 
+def lone_surrogate(obj: Any, place: str = "") -> tuple[str, int] | None:
+    """(where, character number from 1) of the first lone surrogate in the strings (keys
+    included) of a parsed JSON value, None when there is none. JSON can write one (a
+    ``\\ud800`` escape without the other half of its pair), but no text file can hold it."""
+    if isinstance(obj, str):
+        try:
+            obj.encode("utf-8")
+        except UnicodeEncodeError as err:
+            return place, err.start + 1
+        return None
+    items = obj.items() if isinstance(obj, dict) else enumerate(obj) if isinstance(obj, list) else ()
+    for key, value in items:
+        where = f"{place}[{key}]" if isinstance(key, int) else f"{place}.{key}" if place else str(key)
+        found = (lone_surrogate(key, f"{where} (the key)") if isinstance(key, str) else None) \
+            or lone_surrogate(value, where)
+        if found is not None:
+            return found
+    return None
+
+
+def check_surrogates(obj: Any, text: str, path: Path, what: str) -> Any:
+    """``obj`` (parsed from the JSON ``text`` of ``path``) when none of its strings holds a lone
+    surrogate; an InputError naming the place and the character otherwise."""
+    from .errors import InputError, visible
+
+    found = lone_surrogate(obj) if "\\u" in text else None
+    if found is not None:
+        where, at = found
+        raise InputError(path, visible(where) or "top level", f"{what} holds a lone surrogate at character "
+                         f"{at} (a \\uD800-\\uDFFF escape without the other half of its pair), which no text "
+                         "can hold", "write the character itself, or both halves of its pair")
+    return obj
+
+
 def read_json(path: Path, what: str, fix: str = "") -> Any:
     """A user's JSON file (:func:`read_text` and strict JSON: no NaN / Infinity, no key twice in
-    one object); InputErrors name the file, the line and column of a syntax error, and ``fix``."""
+    one object, no lone surrogate in a string); InputErrors name the file, the line and column of
+    a syntax error, and ``fix``."""
     from .errors import InputError
 
     text = read_text(path, what, fix)
     try:
-        return json.loads(text, parse_constant=no_constants, object_pairs_hook=no_duplicates)
+        doc = json.loads(text, parse_constant=no_constants, object_pairs_hook=no_duplicates)
     except RecursionError:
         raise InputError(path, "", f"{what} is nested too deeply to be read",
                          fix or "check the file") from None
@@ -102,6 +138,7 @@ def read_json(path: Path, what: str, fix: str = "") -> Any:
     except ValueError as err:
         raise InputError(path, "", f"malformed JSON ({err})",
                          fix or "use finite numbers and unique keys") from None
+    return check_surrogates(doc, text, path, what)
 
 
 def read_json_doc(path: Path, fmt: str, what: str, fix: str) -> dict:
@@ -174,12 +211,17 @@ class FolderLock:
     """One run owns an out folder: an exclusive ``flock`` on ``OUT/.icrsumo.lock`` (holding the
     owner's pid), taken before the folder's configuration is checked and held until the run
     ends; the system releases it when the process dies, however it dies. A second run on the
-    folder meanwhile is an InputError naming the owner's pid. The folder is made when missing;
+    folder meanwhile is an InputError naming the owner's pid (``busy_fix`` says what to do), a
+    folder that cannot be written (a read-only disk) one saying so. The folder is made when missing;
     on leaving, the lock file goes, and so does a folder this lock made that is then empty (a
     refused run leaves nothing behind)."""
 
-    def __init__(self, path: Path) -> None:
+    #: what a run that finds the folder taken should do (overridden per command)
+    BUSY_FIX = "wait for it to end, or use another --out folder"
+
+    def __init__(self, path: Path, busy_fix: str = "") -> None:
         self.path = Path(path)
+        self.busy_fix = busy_fix or self.BUSY_FIX
         self._fd: int | None = None
         self._made = False
 
@@ -191,14 +233,21 @@ class FolderLock:
         self._made = not self.path.exists()
         self.path.mkdir(parents=True, exist_ok=True)
         lock = self.path / LOCK_NAME
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as err:
+            if err.errno not in (errno.EACCES, errno.EPERM, errno.EROFS):
+                raise
+            raise InputError(self.path, "", f"the folder is not writable ({err.strerror}), and this command "
+                             "writes into it", "make the folder writable, or copy it somewhere writable and "
+                             "run the command on the copy") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             owner = os.read(fd, 32).decode("ascii", "replace").strip() or "?"
             os.close(fd)
             raise InputError(self.path, "", f"another icrsumo run (pid {owner}) is using this folder",
-                             "wait for it to end, or use another --out folder") from None
+                             self.busy_fix) from None
         os.ftruncate(fd, 0)
         os.write(fd, str(os.getpid()).encode("ascii"))
         self._fd = fd
@@ -213,6 +262,20 @@ class FolderLock:
         if self._made:
             with contextlib.suppress(OSError):
                 self.path.rmdir()                         # only when empty
+
+
+#: longest file name icrsumo derives from a name or an id (most file systems allow 255 bytes)
+MAX_FILE_NAME = 120
+
+
+def bounded_name(name: str, original: str | None = None, limit: int = MAX_FILE_NAME) -> str:
+    """A file name (``name``: already made of safe characters) of at most ``limit`` characters:
+    a longer one is cut and ends with ``-`` and 8 hex digits of the SHA-256 of ``original``
+    (default ``name``), so that names that differ only past the cut stay apart."""
+    if len(name) <= limit:
+        return name
+    digest = hashlib.sha256((original if original is not None else name).encode("utf-8", "replace"))
+    return f"{name[:limit - 9]}-{digest.hexdigest()[:8]}"
 
 
 def write_atomic(path: Path, data: str | bytes) -> None:

@@ -1,7 +1,11 @@
 """Talking to an OpenAI-compatible chat-completions server (vLLM, llama.cpp's server, a hosted
-API): canonical request bytes and their SHA-256 (the cache key), one bounded HTTP exchange with
-a one-line reason for every failure, the answer text of a response body, the models a server
-serves, and a content-addressed response cache on disk.
+API): canonical request bytes and their SHA-256 (the cache key), one HTTP exchange under a total
+deadline with a one-line reason for every failure, the answer text of a response body, the
+models a server serves, and a content-addressed response cache on disk.
+
+Credentials (an API key, a password in the URL) go to the URL's own origin only: a redirect to
+another origin is refused. Everything a server sends back passes through :func:`redact`, which
+removes them, before anyone stores, logs, caches or prints it.
 
 Used by the LLM instruction generator (:mod:`icrsumo.instructions.llm`) and the LLM
 instruction interpreter (:mod:`icrsumo.agents.llm`). Standard library only.
@@ -9,18 +13,24 @@ instruction interpreter (:mod:`icrsumo.agents.llm`). Standard library only.
 
 from __future__ import annotations
 
+import base64
+import contextlib
 import hashlib
 import http.client
 import ipaddress
 import json
+import os
 import socket
-import time
+import threading
 import urllib.error
 import urllib.parse
 import urllib.request
+from collections.abc import Iterable
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
+from .errors import display_url
 from .fsio import dumps_json, write_atomic
 
 #: larger HTTP bodies are rejected (bytes)
@@ -51,6 +61,11 @@ class TooLarge(Transport):
     """The server's answer was larger than the limit."""
 
 
+class ServerFault(Transport):
+    """The server answered, but not as an OpenAI-compatible server does (an HTML page, a body
+    without ``choices``): a fault of the server or of its URL, never the model's answer."""
+
+
 def chat_url(endpoint: str) -> str:
     """``{endpoint}/chat/completions`` (an endpoint that already ends so is kept)."""
     base = endpoint.strip().rstrip("/")
@@ -78,7 +93,183 @@ def is_loopback(url: str) -> bool:
         return False
 
 
-def _read_bounded(resp: Any, deadline: float, limit: int) -> bytes:
+# --------------------------------------------------------------------------- credentials
+def origin(url: str) -> tuple[str, str, int | None]:
+    """(scheme, host, port) of ``url``, the port made explicit: where credentials may go."""
+    parts = urllib.parse.urlsplit(url)
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    default = {"http": 80, "https": 443}.get(parts.scheme.lower())
+    return parts.scheme.lower(), (parts.hostname or "").lower(), port or default
+
+
+def without_userinfo(url: str) -> str:
+    """``url`` without ``user:password@`` (what is requested; the password goes in a header)."""
+    parts = urllib.parse.urlsplit(url)
+    netloc = parts.netloc.rpartition("@")[2]
+    return urllib.parse.urlunsplit((parts.scheme, netloc, parts.path, parts.query, parts.fragment))
+
+
+def authorization(url: str, api_key: str | None) -> str | None:
+    """The ``Authorization`` header for ``url``: ``Bearer`` the API key, else ``Basic`` the
+    URL's ``user:password``, else None."""
+    if api_key:
+        return f"Bearer {api_key}"
+    parts = urllib.parse.urlsplit(url)
+    if parts.password is None:
+        return None
+    pair = f"{urllib.parse.unquote(parts.username or '')}:{urllib.parse.unquote(parts.password)}"
+    return "Basic " + base64.b64encode(pair.encode("utf-8")).decode("ascii")
+
+
+def secrets_of(url: str, api_key: str | None) -> tuple[str, ...]:
+    """Every form in which the credentials of a request to ``url`` may come back: the API key,
+    the URL's password (as written and decoded), the ``Authorization`` header's token, each
+    also as JSON and URL quoting write it; longest first."""
+    raw = [api_key or "", urllib.parse.urlsplit(url).password or ""]
+    raw.append(urllib.parse.unquote(raw[1]))
+    header = authorization(url, api_key)
+    raw.append(header.partition(" ")[2] if header else "")
+    forms = {f for s in raw if s.strip()
+             for f in (s, json.dumps(s)[1:-1], json.dumps(s)[1:-1].replace("/", "\\/"),
+                       urllib.parse.quote(s, safe=""), urllib.parse.quote_plus(s))}
+    return tuple(sorted(forms, key=len, reverse=True))
+
+
+_T = TypeVar("_T", str, bytes)
+
+
+def redact(text: _T, secrets: Iterable[str]) -> _T:
+    """``text`` (str or bytes) with every secret in ``secrets`` replaced by ``***``: what a
+    server sent back, made safe to store, log, cache or print."""
+    as_bytes = isinstance(text, bytes)
+    for s in secrets:
+        if s:
+            text = text.replace(s.encode("utf-8"), b"***") if as_bytes else text.replace(s, "***")
+    return text
+
+
+# --------------------------------------------------------------------------- the exchange
+@dataclass(frozen=True)
+class Reply:
+    """What a server answered: the HTTP ``status``, the ``body`` (credentials already
+    redacted), its ``content_type`` (media type, lower case; "" when none) and the ``secrets``
+    to redact from any text taken out of it."""
+
+    status: int
+    body: bytes
+    content_type: str
+    secrets: tuple[str, ...] = field(default=(), repr=False)
+
+    def clean(self, text: str) -> str:
+        """``text`` taken out of the body (decoded), with the credentials redacted."""
+        return redact(text, self.secrets)
+
+    def snippet(self, n: int = 80) -> str:
+        """The body's first ``n`` characters on one line (what came back, for a message)."""
+        text = self.clean(self.body[: 4 * n].decode("utf-8", "replace"))
+        text = " ".join("".join(c if c.isprintable() else " " for c in text).split())
+        return text[:n] + ("..." if len(text) > n else "")
+
+    def fault(self, what: str) -> ServerFault:
+        """The :class:`ServerFault` of this reply, saying ``what`` is missing."""
+        kind = self.content_type or "no content type"
+        return ServerFault(f"answered HTTP {self.status} with {kind} ({self.snippet()!r}), not an "
+                           f"OpenAI-compatible JSON answer ({what})")
+
+
+class Deadline:
+    """A total deadline for one request: when ``seconds`` have passed, the connections it
+    watches are shut down, so a server that trickles its answer cannot hold a read past it."""
+
+    def __init__(self, seconds: float) -> None:
+        self.seconds = seconds
+        self.expired = False
+        self._socks: list[socket.socket] = []
+        self._lock = threading.Lock()
+        self._timer = threading.Timer(seconds, self._expire)
+        self._timer.daemon = True
+
+    def __enter__(self) -> Deadline:
+        self._timer.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._timer.cancel()
+
+    def watch(self, sock: socket.socket) -> None:
+        """Shut ``sock`` down at the deadline (at once when it has passed)."""
+        with self._lock:
+            self._socks.append(sock)
+            if self.expired:
+                _shut(sock)
+
+    def _expire(self) -> None:
+        with self._lock:
+            self.expired = True
+            for sock in self._socks:
+                _shut(sock)
+
+
+def _shut(sock: socket.socket) -> None:
+    with contextlib.suppress(OSError):
+        sock.shutdown(socket.SHUT_RDWR)
+
+
+class _Watched:
+    """A connection whose socket its :class:`Deadline` watches once connected."""
+
+    def __init__(self, *args: Any, deadline: Deadline, **kw: Any) -> None:
+        super().__init__(*args, **kw)
+        self.deadline = deadline
+
+    def connect(self) -> None:
+        super().connect()
+        self.deadline.watch(self.sock)
+
+
+class _HTTPConnection(_Watched, http.client.HTTPConnection):
+    pass
+
+
+class _HTTPSConnection(_Watched, http.client.HTTPSConnection):
+    pass
+
+
+class _HTTPHandler(urllib.request.HTTPHandler):
+    def __init__(self, deadline: Deadline) -> None:
+        super().__init__()
+        self.deadline = deadline
+
+    def http_open(self, req: urllib.request.Request) -> Any:
+        return self.do_open(_HTTPConnection, req, deadline=self.deadline)
+
+
+class _HTTPSHandler(urllib.request.HTTPSHandler):
+    def __init__(self, deadline: Deadline) -> None:
+        super().__init__()
+        self.deadline = deadline
+
+    def https_open(self, req: urllib.request.Request) -> Any:
+        return self.do_open(_HTTPSConnection, req, context=self._context, deadline=self.deadline)
+
+
+class _SameOrigin(urllib.request.HTTPRedirectHandler):
+    """Follows a redirect within the request's origin only; one to another origin (where the
+    credentials would go) is a :class:`Transport` failure."""
+
+    def redirect_request(self, req: urllib.request.Request, fp: Any, code: int, msg: str, headers: Any,
+                         newurl: str) -> urllib.request.Request | None:
+        if origin(newurl) != origin(req.full_url):
+            fp.close()
+            raise Transport(f"redirected (HTTP {code}) to another origin, {display_url(newurl)}: credentials "
+                            "are only sent to the URL's own origin, so give the server's own URL")
+        return super().redirect_request(req, fp, code, msg, headers, newurl)
+
+
+def _read_bounded(resp: Any, limit: int) -> bytes:
     chunks: list[bytes] = []
     size = 0
     while True:
@@ -89,8 +280,6 @@ def _read_bounded(resp: Any, deadline: float, limit: int) -> bytes:
         if size > limit:
             raise TooLarge(f"response larger than {limit} bytes")
         chunks.append(chunk)
-        if time.monotonic() > deadline:
-            raise TimeoutError("timed out")
 
 
 def _reason(err: BaseException) -> tuple[str, bool]:
@@ -108,51 +297,69 @@ def _reason(err: BaseException) -> tuple[str, bool]:
     return f"{type(err).__name__}: {err}", False
 
 
-def exchange(url: str, data: bytes | None, *, api_key: str | None, timeout: float,
-             limit: int = MAX_RESPONSE_BYTES) -> tuple[int, bytes]:
-    """POST ``data`` (GET when None) to ``url``; returns (HTTP status, body bytes), the body
-    read within ``timeout`` s and at most ``limit`` bytes. Transport failures raise
-    :class:`Transport` (:class:`TooLarge` for an oversized body). A loopback server is reached
-    directly, whatever ``*_proxy`` variables say."""
-    headers = {"Accept": "application/json"}
-    if data is not None:
-        headers["Content-Type"] = "application/json"
-    if api_key:
-        headers["Authorization"] = f"Bearer {api_key}"
-    req = urllib.request.Request(url, data=data, headers=headers, method="GET" if data is None else "POST")
-    handlers = [urllib.request.ProxyHandler({})] if is_loopback(url) else []
-    opener = urllib.request.build_opener(*handlers)
-    deadline = time.monotonic() + timeout
+def _open(req: urllib.request.Request, deadline: Deadline, limit: int) -> tuple[int, bytes, str]:
+    """(status, body, content type) of ``req``, every step within ``deadline``."""
+    proxies = [urllib.request.ProxyHandler({})] if is_loopback(req.full_url) else []
+    opener = urllib.request.build_opener(*proxies, _HTTPHandler(deadline), _HTTPSHandler(deadline),
+                                         _SameOrigin())
     try:
-        with opener.open(req, timeout=timeout) as resp:
-            return resp.status, _read_bounded(resp, deadline, limit)
+        with opener.open(req, timeout=deadline.seconds) as resp:
+            return resp.status, _read_bounded(resp, limit), resp.headers.get_content_type()
     except urllib.error.HTTPError as err:
         try:
-            raw = _read_bounded(err, deadline, limit)
+            raw = _read_bounded(err, limit)
         except (OSError, http.client.HTTPException, Transport):
             raw = b""
         finally:
             err.close()
-        return err.code, raw
-    except Transport:
-        raise
-    except (urllib.error.URLError, http.client.HTTPException, OSError) as err:
-        reason, unreachable = _reason(err)
-        raise Transport(reason, unreachable=unreachable) from err
+        return err.code, raw, err.headers.get_content_type() if err.headers else ""
 
 
-def http_problem(status: int, raw: bytes) -> str:
-    """``HTTP 404: model not found``: a status and the error message of its body, one line."""
-    detail = raw[:300].decode("utf-8", "replace")
+def exchange(url: str, data: bytes | None, *, api_key: str | None, timeout: float,
+             limit: int = MAX_RESPONSE_BYTES) -> Reply:
+    """POST ``data`` (GET when None) to ``url``: the server's :class:`Reply`, the whole exchange
+    (connect, headers, body) within ``timeout`` s and the body at most ``limit`` bytes.
+    ``api_key`` goes as ``Authorization: Bearer``, else a password in the URL as ``Basic``; a
+    redirect to another origin is refused. Transport failures raise :class:`Transport`
+    (:class:`TooLarge` for an oversized body), their reason redacted. A loopback server is
+    reached directly, whatever ``*_proxy`` variables say."""
+    secrets = secrets_of(url, api_key)
+    target = without_userinfo(url)
+    headers = {"Accept": "application/json"}
+    if data is not None:
+        headers["Content-Type"] = "application/json"
+    auth = authorization(url, api_key)
+    if auth:
+        headers["Authorization"] = auth
+    req = urllib.request.Request(target, data=data, headers=headers, method="GET" if data is None else "POST")
+    deadline = Deadline(timeout)
     try:
-        err = json.loads(raw)
+        with deadline:
+            status, raw, kind = _open(req, deadline, limit)
+    except Transport as err:
+        raise type(err)(redact(str(err), secrets), err.unreachable) from None
+    except (urllib.error.URLError, http.client.HTTPException, OSError, ValueError) as err:
+        reason, unreachable = _reason(err)
+        if deadline.expired:
+            reason, unreachable = "timed out", False
+        raise Transport(redact(reason, secrets), unreachable=unreachable) from None
+    if deadline.expired:   # the body may have been cut at the deadline
+        raise Transport("timed out")
+    return Reply(status, redact(raw, secrets), kind, secrets)
+
+
+def http_problem(reply: Reply) -> str:
+    """``HTTP 404: model not found``: a status and the error message of its body, one line."""
+    detail = reply.body[:300].decode("utf-8", "replace")
+    try:
+        err = json.loads(reply.body)
         if isinstance(err, dict):
             inner = err.get("error", err.get("detail", err))
             detail = str(inner.get("message", inner) if isinstance(inner, dict) else inner)[:300]
     except (ValueError, RecursionError):
         pass
-    detail = " ".join(detail.split())
-    return f"HTTP {status}" + (f": {detail}" if detail else "")
+    detail = " ".join(reply.clean(detail).split())
+    return f"HTTP {reply.status}" + (f": {detail}" if detail else "")
 
 
 class Invalid(Exception):
@@ -169,39 +376,56 @@ class Invalid(Exception):
         return shown + (f" (and {more} more problem(s))" if more > 0 else "")
 
 
-def answer_text(raw: bytes) -> tuple[str, str]:
+def answer_text(reply: Reply) -> tuple[str, str]:
     """(``choices[0].message.content``, ``choices[0].finish_reason`` or "") of a
-    chat-completions response body; :class:`Invalid` when the body has no answer text."""
+    chat-completions response: the model's answer text ("" when it said nothing), redacted.
+    :class:`ServerFault` when the body is not such a response (an HTML page, no choices)."""
     try:
-        body = json.loads(raw)
-    except (ValueError, RecursionError) as err:
-        raise Invalid([f"response body is not JSON ({str(err)[:80]})"]) from None
-    if not isinstance(body, dict):
-        raise Invalid(["response body is not a JSON object"])
-    choices = body.get("choices")
+        body = json.loads(reply.body)
+    except (ValueError, RecursionError):
+        raise reply.fault("the body is not JSON") from None
+    choices = body.get("choices") if isinstance(body, dict) else None
     if not isinstance(choices, list) or not choices or not isinstance(choices[0], dict):
-        raise Invalid(["response has no choices[0]"])
+        raise reply.fault("no choices[0]")
     message = choices[0].get("message")
-    content = message.get("content") if isinstance(message, dict) else None
-    if not isinstance(content, str) or not content.strip():
-        raise Invalid(["response has no choices[0].message.content text"])
+    content = message.get("content") if isinstance(message, dict) else False
+    if content is not None and not isinstance(content, str):
+        raise reply.fault("no choices[0].message.content text")
     reason = choices[0].get("finish_reason")
-    return content, reason if isinstance(reason, str) else ""
+    return reply.clean(content or ""), reason if isinstance(reason, str) else ""
 
 
 def served_models(endpoint: str, *, api_key: str | None, timeout: float) -> list[str] | None:
     """The model ids ``GET {endpoint}/models`` lists, or None when the server has no such list
-    (any answer but a 200 with ``data: [{"id": ...}]``). :class:`Transport` when unreachable."""
-    status, raw = exchange(models_url(endpoint), None, api_key=api_key, timeout=timeout, limit=1 << 20)
-    if status != 200:
-        if status in (401, 403):
-            raise Transport(http_problem(status, raw))
+    (an answer other than 200). :class:`Transport` when unreachable or refusing the key,
+    :class:`ServerFault` when a 200 is not the OpenAI API's list (``data: [{"id": ...}]``)."""
+    reply = exchange(models_url(endpoint), None, api_key=api_key, timeout=timeout, limit=1 << 20)
+    if reply.status in (401, 403):
+        raise Transport(http_problem(reply))
+    if reply.status != 200:
         return None
     try:
-        data = json.loads(raw).get("data")
-        return [str(m["id"]) for m in data if isinstance(m, dict) and "id" in m]
+        data = json.loads(reply.body).get("data")
+        return [reply.clean(str(m["id"])) for m in data if isinstance(m, dict) and "id" in m]
     except (ValueError, RecursionError, AttributeError, TypeError):
-        return None
+        raise reply.fault('no "data" list of models') from None
+
+
+def unwritable(folder: Path) -> str:
+    """Why files cannot be made under ``folder`` and its subfolders ("" when they can): a file
+    in the way, or no write permission on the folder, on one of its subfolders or on the
+    nearest existing folder above it (the folder itself is not created)."""
+    folder = Path(folder)
+    existing = next((p for p in (folder, *folder.parents) if p.exists()), None)
+    if existing is None:
+        return ""
+    if not existing.is_dir():
+        return f"{existing} is a file, not a folder"
+    subfolders = [p for p in existing.glob("??") if p.is_dir()] if existing == folder else []
+    for p in (existing, *subfolders):
+        if not os.access(p, os.W_OK | os.X_OK):
+            return f"no permission to write in {p}"
+    return ""
 
 
 class ResponseCache:

@@ -25,7 +25,11 @@ traffic-light stop lines) straight into the ego frame. The route is never drawn.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
+import sys
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -519,16 +523,65 @@ def png_bytes(rgb: np.ndarray) -> bytes:
     return buf.tobytes()
 
 
+def wrap_text(text: str, max_px: int, max_lines: int, font: int = cv2.FONT_HERSHEY_SIMPLEX,
+              fscale: float = 0.45, words: bool = True) -> list[str]:
+    """``text`` (ASCII-fied) in lines at most ``max_px`` wide when drawn with ``font`` at
+    ``fscale``, broken between words (``words=False``: one line), at most ``max_lines``; what
+    does not fit ends in "..."."""
+    def fits(t: str) -> bool:
+        return cv2.getTextSize(t, font, fscale, 1)[0][0] <= max_px
+
+    def cut(t: str) -> str:  # shorten to one line ending in "..."
+        while t and not fits(t + "..."):
+            t = t[:-1]
+        return t + "..."
+
+    if not words:
+        line = _ascii(text)
+        return [line if fits(line) else cut(line)]
+    lines: list[str] = []
+    for word in _ascii(text).split():
+        if lines and fits(f"{lines[-1]} {word}"):
+            lines[-1] = f"{lines[-1]} {word}"
+        else:
+            lines.append(word if fits(word) else cut(word))
+    if len(lines) > max_lines:
+        lines = lines[:max_lines]
+        lines[-1] = cut(lines[-1])
+    return lines
+
+
 def write_image(path: Path, bgr: np.ndarray, caption: str = "") -> None:
     """Write a BGR frame (:meth:`VideoWriter.frame`) as an image file (PNG by its suffix), with
-    an optional one-line ``caption`` in red on a band below it."""
+    an optional ``caption`` in red on a band below it (wrapped, at most 3 lines)."""
     if caption:
-        band = np.zeros((28, bgr.shape[1], 3), dtype=np.uint8)
-        cv2.putText(band, _ascii(caption)[:90], (6, 19), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (60, 60, 255), 1,
-                    cv2.LINE_AA)
+        lines = wrap_text(caption, bgr.shape[1] - 12, 3)
+        band = np.zeros((10 + 18 * len(lines), bgr.shape[1], 3), dtype=np.uint8)
+        for i, line in enumerate(lines):
+            cv2.putText(band, line, (6, 19 + 18 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (60, 60, 255), 1,
+                        cv2.LINE_AA)
         bgr = np.vstack([bgr, band])
     if not cv2.imwrite(str(path), bgr):
         raise OSError(f"cannot write the image {path}")
+
+
+@contextlib.contextmanager
+def _quiet_stderr() -> Iterator[None]:
+    """File descriptor 2 sent to /dev/null for the duration (what C libraries print there)."""
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        sys.stderr.flush()
+    try:
+        saved = os.dup(2)
+    except OSError:  # no fd 2 at all: nothing to quiet
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 class VideoWriter:
@@ -536,10 +589,18 @@ class VideoWriter:
     (nearest), with the instruction text (and an optional notice) in a band below and the speed
     in the top-left corner. Use as a context manager.
 
-    Writes ``path`` with the mp4v codec; where this OpenCV build cannot, writes MJPG to
-    ``path.with_suffix('.avi')``. :attr:`path` is the file actually written (known after the
-    first frame). Text is drawn with a Hershey font: ASCII only, other characters become '?'.
+    The container follows ``path``'s suffix: ``.webm`` (the default) is VP8 video, which
+    Chromium, Firefox and Safari play in a page or straight from the file; ``.mp4`` is MPEG-4
+    Part 2 (mp4v: desktop players, not browsers); ``.avi`` is Motion JPEG. Where this OpenCV
+    build cannot write the codec, the next one in that order is written, with its suffix.
+    :attr:`path` is the file actually written (known after the first frame). Text is drawn with
+    a Hershey font: ASCII only, other characters become '?'.
     """
+
+    #: suffix -> (fourcc, suffix) tried in order: the asked-for container first, then fallbacks
+    CODECS = {".webm": (("VP80", ".webm"), ("mp4v", ".mp4"), ("MJPG", ".avi")),
+              ".mp4": (("mp4v", ".mp4"), ("MJPG", ".avi")),
+              ".avi": (("MJPG", ".avi"),)}
 
     #: text lines in the band under the BEV (instruction lines + one notice line)
     TEXT_LINES = 4
@@ -564,14 +625,17 @@ class VideoWriter:
     def _open(self, h: int, w: int) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         size = (w * self.scale, h * self.scale + self._band_height())
-        for fourcc, suffix in (("mp4v", self.path.suffix or ".mp4"), ("MJPG", ".avi")):
+        codecs = self.CODECS.get(self.path.suffix.lower(), self.CODECS[".webm"])
+        for fourcc, suffix in codecs:
             target = self.path.with_suffix(suffix)
-            vw = cv2.VideoWriter(str(target), cv2.VideoWriter_fourcc(*fourcc), self.fps, size)
+            with _quiet_stderr():  # OpenCV's FFmpeg prints a harmless tag warning for WebM
+                vw = cv2.VideoWriter(str(target), cv2.VideoWriter_fourcc(*fourcc), self.fps, size)
             if vw.isOpened():
                 self._writer, self.path = vw, target
                 return
             vw.release()
-        raise RuntimeError(f"cannot open a video writer for {self.path} (neither mp4v nor MJPG)")
+        tried = ", ".join(f for f, _ in codecs)
+        raise RuntimeError(f"cannot open a video writer for {self.path} (this OpenCV writes none of {tried})")
 
     def _band_height(self) -> int:
         return 8 + 18 * self.TEXT_LINES
@@ -603,28 +667,11 @@ class VideoWriter:
         font, fscale = cv2.FONT_HERSHEY_SIMPLEX, 0.45
         max_px = bev.shape[1] - 12
 
-        def fits(t: str) -> bool:
-            return cv2.getTextSize(t, font, fscale, 1)[0][0] <= max_px
-
-        def cut(t: str) -> str:  # shorten to one line ending in "..."
-            while t and not fits(t + "..."):
-                t = t[:-1]
-            return t + "..."
-
-        lines: list[str] = []
-        for word in _ascii(text).split():
-            if lines and fits(f"{lines[-1]} {word}"):
-                lines[-1] = f"{lines[-1]} {word}"
-            else:
-                lines.append(word if fits(word) else cut(word))
-        n_text = self.TEXT_LINES - (1 if notice else 0)
-        if len(lines) > n_text:
-            lines = lines[:n_text]
-            lines[-1] = cut(lines[-1])
+        lines = wrap_text(text, max_px, self.TEXT_LINES - (1 if notice else 0), font, fscale)
         rows = [(ln, (255, 255, 255)) for ln in lines]
         if notice:
-            ln = " ".join(_ascii(notice).split())
-            rows.append((ln if fits(ln) else cut(ln), (0, 220, 255)))
+            rows.append((wrap_text(" ".join(_ascii(notice).split()), max_px, 1, font, fscale, words=False)[0],
+                         (0, 220, 255)))
         for i, (ln, colour) in enumerate(rows):
             cv2.putText(band, ln, (6, 20 + 18 * i), font, fscale, colour, 1, cv2.LINE_AA)
         corner = " ".join(x for x in (f"{t:6.1f} s" if t is not None else "",

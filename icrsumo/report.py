@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 
 from .aggregate import BASELINE, EPISODE_COLUMNS, episode_table
-from .fsio import dumps_json, write_atomic
+from .errors import visible
+from .fsio import MAX_FILE_NAME, bounded_name, dumps_json, write_atomic
 from .types import EpisodeLog, EpisodeRecord
 from .vocab import EpisodeStatus, EventKind, Family, Termination
 
@@ -100,12 +101,15 @@ _TEX_SPECIAL = {"\\": r"\textbackslash{}", "~": r"\textasciitilde{}", "^": r"\^{
 
 
 def md_cell(s: str) -> str:
-    """``s`` safe in a Markdown table cell: one line, ``|`` escaped."""
-    return " ".join(str(s).split()).replace("|", "\\|")
+    """``s`` safe in a Markdown table cell: one line, ``|`` escaped, control characters written
+    out (:func:`icrsumo.errors.visible`). Every Markdown table of a name or a text uses it."""
+    return visible(" ".join(str(s).split())).replace("|", "\\|")
 
 
-def _tex_escape(s: str) -> str:
-    return "".join(_TEX_SPECIAL.get(c, c) for c in s)
+def tex_escape(s: str) -> str:
+    """``s`` safe in LaTeX: one line, control characters written out
+    (:func:`icrsumo.errors.visible`), then LaTeX's special characters escaped."""
+    return "".join(_TEX_SPECIAL.get(c, c) for c in visible(" ".join(str(s).split())))
 
 
 def _tex_num(cell: str) -> str:
@@ -187,7 +191,7 @@ def tables(summary: dict) -> dict[str, str]:
     for agent, fam, text in text_rows:
         if prev is not None and agent != prev:
             tex.append(r"\midrule")
-        cells = [_tex_escape(agent) if agent != prev else "", _tex_escape(fam)]
+        cells = [tex_escape(agent) if agent != prev else "", tex_escape(fam)]
         cells += [_tex_num(c) for c in text]
         tex.append(" & ".join(cells) + r" \\")
         prev = agent
@@ -221,7 +225,7 @@ def statistics_tables(summary: dict) -> dict[str, str]:
             flips = b.get("flips") or {"lost": None, "gained": None}
             pdr = [None if b.get(k) is None else 100.0 * b[k] for k in ("pdr_DS", "pdr_RC")]
             md.append("| " + " | ".join([
-                agent, fam, str(b["n_routes"]), _num(b.get("dDS"), 1, True), _num(pdr[0], 1),
+                md_cell(agent), fam, str(b["n_routes"]), _num(b.get("dDS"), 1, True), _num(pdr[0], 1),
                 _num(pdr[1], 1), _p(b.get("p_value")), _p(b.get("p_value_raw")),
                 str(flips["lost"]), str(flips["gained"])]) + " |")
             rows.append([agent, fam, b["n_routes"], b.get("dDS"), b.get("pdr_DS"), b.get("pdr_RC"),
@@ -307,7 +311,7 @@ def confusion_heatmaps(summary: dict, agent: str, path: Path) -> None:
         ax.set_yticks(range(len(rows)), rows if i == 0 else [""] * len(rows), fontsize=7)
         ax.set_title(fam, fontsize=9)
         ax.set_xlabel("executed", fontsize=7)
-    fig.suptitle(f"{agent}: instructed intent (rows) x executed branch", fontsize=9)
+    fig.suptitle(f"{visible(agent)}: instructed intent (rows) x executed branch", fontsize=9)
     fig.tight_layout()
     _save(fig, path)
 
@@ -320,7 +324,7 @@ def template_flip_bars(doc: dict, path: Path, top: int = 15) -> None:
         return
     fig = _figure(7.5, 0.32 * len(rows) + 1.6)
     ax = fig.add_subplot()
-    labels = [f"{r['family']}: {r['template']}" for r in rows][::-1]
+    labels = [visible(f"{r['family']}: {r['template']}") for r in rows][::-1]
     ax.barh(range(len(rows)), [r["flips"] for r in rows][::-1], color="tab:red")
     for y, r in enumerate(rows[::-1]):
         rate = "" if r["flip_rate"] is None else f" ({100.0 * r['flip_rate']:.0f} % of {r['uses']})"
@@ -391,9 +395,9 @@ def rd_to_plane(summary: dict, path: Path) -> None:
     ax.set_xlabel("TO share (% of episodes: timeout, blocked, stuck)", fontsize=11)
     ax.set_ylabel("RD share (% of episodes: route deviation)", fontsize=11)
     ax.tick_params(labelsize=10)
-    ax.set_title(f"Failure split, suite {summary.get('suite', '')}", fontsize=12)
+    ax.set_title(f"Failure split, suite {visible(str(summary.get('suite', '')))}", fontsize=12)
     ax.grid(True, color="0.92", zorder=0)
-    agent_handles = [Line2D([], [], color=c, marker="o", linestyle="", markersize=8, label=a)
+    agent_handles = [Line2D([], [], color=c, marker="o", linestyle="", markersize=8, label=visible(a))
                      for a, c in colours.items()]
     fam_handles = [Line2D([], [], color="0.3", marker=_FAMILY_MARKERS.get(f, "P"), linestyle="", markersize=8,
                           markerfacecolor="none" if f == BASELINE else "0.3", label=f) for f in families]
@@ -424,13 +428,14 @@ def delta_bars(summary: dict, path: Path) -> None:
                 lo.append(0.0 if d is None or ci is None else max(0.0, d - ci[0]))
                 hi.append(0.0 if d is None or ci is None else max(0.0, ci[1] - d))
             xs = x0 - 0.4 + width * (i + 0.5)
-            ax.bar(xs, vals, width=width * 0.95, color=colours[agent], label=agent,
+            ax.bar(xs, vals, width=width * 0.95, color=colours[agent], label=visible(agent),
                    yerr=np.array([lo, hi]), capsize=3, error_kw={"elinewidth": 1.0})
         ax.axhline(0.0, color="0.3", lw=0.8)
         ax.set_axisbelow(True)
         ax.set_ylabel(f"Δ{metric} vs baseline")
         ax.grid(True, axis="y", color="0.92")
-    axes[0].set_title(f"Paired deltas with 95 % route-bootstrap CI, suite {summary.get('suite', '')}")
+    suite = visible(str(summary.get("suite", "")))
+    axes[0].set_title(f"Paired deltas with 95 % route-bootstrap CI, suite {suite}")
     axes[1].set_xticks(x0)
     axes[1].set_xticklabels(fams)
     if agents:
@@ -472,7 +477,7 @@ def paired_rollout(net, baseline_log: EpisodeLog, variant_logs: list[tuple[str, 
         lo, hi = allp.min(axis=0), allp.max(axis=0)
 
     caption = [("baseline", baseline_text, "black")] + [(lab, txt, c) for lab, _, txt, c in trajs[1:]]
-    wrapped = [textwrap.wrap(f"{lab}: {txt}", 95) or [f"{lab}:"] for lab, txt, _ in caption]
+    wrapped = [textwrap.wrap(visible(f"{lab}: {txt}"), 95) or [f"{lab}:"] for lab, txt, _ in caption]
     n_lines = sum(len(w) for w in wrapped)
     fig_w, map_w, map_h, line_h = 7.5, 6.6, 5.6, 0.2  # inches
     cap_h = 0.2 + line_h * n_lines
@@ -525,7 +530,7 @@ def paired_rollout(net, baseline_log: EpisodeLog, variant_logs: list[tuple[str, 
     ax.set_ylabel("y (m)")
     ax.legend(fontsize=7, loc="best")
     if title:
-        ax.set_title(title)
+        ax.set_title(visible(title))
     yy = cap_h / total_h
     for (_, _, colour), lines in zip(caption, wrapped):
         for line in lines:
@@ -771,8 +776,12 @@ LEADERBOARD_FILES = {"lb1": leaderboard_checkpoint, "lb2": leaderboard_checkpoin
 
 # --------------------------------------------------------------------------- all of it
 def _file_name(s: str) -> str:
+    """The part of a file name that stands for ``s`` (an agent name, a family): letters,
+    digits and ``_.-`` kept, the rest ``_``, at most half of
+    :data:`icrsumo.fsio.MAX_FILE_NAME` characters (a longer name is cut and ends with a hash of it)."""
     name = re.sub(r"[^A-Za-z0-9_.-]", "_", s)
-    return name if name not in ("", ".", "..") else f"x_{name}"
+    name = name if name not in ("", ".", "..") else f"x_{name}"
+    return bounded_name(name, s, MAX_FILE_NAME // 2)
 
 
 def figure_or_note(draw: Any, *args: Any) -> None:
@@ -785,7 +794,7 @@ def figure_or_note(draw: Any, *args: Any) -> None:
         raise
     except Exception as err:  # noqa: BLE001 - matplotlib's many ways to fail on odd text
         print(f"icrsumo: note: no figure {Path(args[-1]).name}: {type(err).__name__}: "
-              f"{' '.join(str(err).split())[:160]}", file=sys.stderr)
+              f"{visible(' '.join(str(err).split())[:160])}", file=sys.stderr)
 
 
 @plain_text
@@ -800,7 +809,7 @@ def guard_tradeoff(doc: dict, path: Path) -> None:
         x, y = 100 * g["false_blocks"], 100 * g["detection"]
         ax.scatter([x], [y], s=40, color=f"C{i % 10}", zorder=3)
         right = x > 60  # the label inside the axes, beside its point
-        ax.annotate(name, (x, y), textcoords="offset points", xytext=(-7 if right else 7, 0),
+        ax.annotate(visible(name), (x, y), textcoords="offset points", xytext=(-7 if right else 7, 0),
                     ha="right" if right else "left", va="center", fontsize=8)
     ax.set_xlim(-2, 102)
     ax.set_ylim(-2, 102)

@@ -4,8 +4,10 @@ a scenario's SUMO config and route files) declares no DTD or entities."""
 
 from __future__ import annotations
 
+import difflib
 import math
 import re
+from collections.abc import Iterable
 from functools import lru_cache
 from pathlib import Path
 from xml.etree.ElementTree import Element, ParseError
@@ -234,6 +236,71 @@ def read_routes(path: Path) -> tuple[list[RouteSpec], list[tuple[int, InputError
         seen.add(spec.id)
         routes.append(spec)
     return routes, errors
+
+
+def looks_like_path(name: str) -> bool:
+    """Whether a suite argument names a file or folder rather than a bundled suite: it has a
+    path separator, a suffix (``routes.xml``) or starts with ``.`` or ``~``."""
+    return any(c in name for c in "/\\") or name.startswith((".", "~")) or bool(Path(name).suffix)
+
+
+def suite_file(suite: str, field: str = "suite", folders: bool = False) -> Path | None:
+    """The route XML file of ``suite``: a bundled suite's name (``tiny``) or a route file's
+    path. With ``folders``, a convert-routes folder (one holding ``index.json``) is accepted
+    too, and gives None (its routes are converted already). Otherwise an InputError: a
+    path-like name that does not exist is a missing file (named as given), a plain name no
+    bundled suite has is an unknown suite, with the closest names (``field`` names the
+    argument)."""
+    from .resources import bundled_suites
+
+    suites = bundled_suites()
+    path = Path(suite).expanduser()
+    if folders and (path / "index.json").is_file():
+        return None
+    if suite in suites:
+        return suites[suite]
+    if path.is_file():
+        return path
+    kinds = "a route XML file or a convert-routes folder" if folders else "a route XML file"
+    if path.is_dir():
+        raise InputError(path, "", "is a folder without index.json, not a convert-routes folder" if folders
+                         else "is a folder, not a route XML file", f"give {kinds}")
+    if looks_like_path(suite):
+        raise InputError(path if suite.startswith("~") else suite, "", "no such route file",
+                         f"check the path; or give a bundled suite: {', '.join(suites)}")
+    hint = _did_you_mean(suite, list(suites), cutoff=0.5)
+    raise InputError(field, suite, "unknown suite",
+                     f"{hint}use a bundled suite ({', '.join(suites)}) or {kinds}")
+
+
+def route_ids(path: Path) -> list[str]:
+    """The id of every ``<route>`` of a route file, in file order, read without converting
+    anything (a route that is otherwise malformed keeps its id here; :func:`read_routes` names
+    its problem)."""
+    root = parse_xml_file(Path(path), expected_root="routes")
+    return [rid.strip() for rid in (el.get("id") for el in root.findall("route")) if rid and rid.strip()]
+
+
+def _did_you_mean(name: str, names: list[str], cutoff: float) -> str:
+    """"did you mean A, B or C? " for the names closest to ``name`` ("" when none is close)."""
+    close = difflib.get_close_matches(name, names, n=3, cutoff=cutoff)
+    if not close:
+        return ""
+    return f"did you mean {' or '.join([', '.join(close[:-1]), close[-1]] if len(close) > 1 else close)}? "
+
+
+def check_route_selection(selected: Iterable[str], ids: Iterable[str], field: str, suite: str) -> None:
+    """InputError for the first of the ``selected`` route ids that is not among ``ids`` (the
+    route file's, :func:`route_ids`), naming its closest ids and the suite's first ids."""
+    have = list(ids)
+    known = set(have)
+    for rid in selected:
+        if rid in known:
+            continue
+        hint = _did_you_mean(rid, have, cutoff=0.6)
+        shown = ", ".join(have[:4]) + (f", ... ({len(have)} routes)" if len(have) > 4 else "")
+        raise InputError(field, short(rid, 60), f"no such route in the suite {suite}",
+                         f"{hint}use the suite's route ids: {shown}")
 
 
 def _fmt(v: float) -> str:

@@ -1,10 +1,12 @@
 """``icrsumo show``: watch any stored episode. Re-simulates it from its out folder (scenario,
 instruction sequence, agent, seed), checks that the replay reproduces the stored log byte for
-byte, and writes the BEV video with the active instruction and notices overlaid plus a still of
-the moment the episode went wrong (its first infraction, else where it ended)."""
+byte, and writes the BEV video (WebM: it plays in a browser) with the active instruction and
+notices overlaid plus a still of the moment the episode went wrong: the decision at which it left
+its route or its first infraction, whichever came first, else where it ended."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -12,11 +14,13 @@ import numpy as np
 
 from .agents.base import Observation
 from .convert import safe_name
+from .decisions import Decision, divergence
 from .errors import InputError
+from .fsio import bounded_name
 from .sim.callbacks import EpisodeCallback
 from .store import ResultStore
 from .types import EpisodeLog, EpisodeRecord
-from .vocab import EpisodeStatus, Family
+from .vocab import DecisionOutcome, EpisodeStatus, Family, Intent
 
 
 @dataclass(frozen=True)
@@ -35,16 +39,36 @@ class ShowResult:
     difference: str = ""
 
 
-def failure_moment(log: EpisodeLog, scoring: str) -> tuple[float, str]:
-    """When (s) and why an episode went wrong: its first penalised infraction, else its
-    termination (for a completed episode without infractions: its end)."""
+def reached_step(progress: Sequence[float], pos: float) -> int:
+    """The step at which the ego reached route position ``pos`` (m): the first step at or past
+    it, else the first at its farthest progress (it left the route before getting there)."""
+    target = min(pos, max(progress))
+    return next(i for i, p in enumerate(progress) if p >= target)
+
+
+def failure_moment(log: EpisodeLog, scoring: str, decisions: Sequence[Decision] = ()) -> tuple[float, str]:
+    """When (s) and why an episode went wrong: the earlier of its first penalised infraction
+    and the decision at which it left its route (``decisions``: the episode's, from
+    :func:`icrsumo.decisions.classify_decisions`), taken when the ego reached that junction or
+    lane change, where the branch is chosen; else its termination (for a completed episode
+    without infractions: its end)."""
     from .metrics import score_episode
 
+    moments = []
     result = score_episode(log, scoring)
     if result.infractions:
         first = min(result.infractions, key=lambda i: i.t)
         other = f" with {first.other}" if first.other else ""
-        return first.t, f"{first.kind}{other} at {first.pos:.0f} m along the route"
+        moments.append((first.t, f"{first.kind}{other} at {first.pos:.0f} m along the route"))
+    left = divergence(decisions)
+    if left is not None and left.outcome in (DecisionOutcome.FOLLOWED_TEXT, DecisionOutcome.OTHER) and log.t:
+        said = ("the instruction named no branch" if left.text_intent == Intent.UNKNOWN
+                else f"the instruction said {left.text_intent}")
+        moments.append((log.t[reached_step(log.progress, left.pos)],
+                        f"the decision where it left the route: {left.kind} at {left.pos:.0f} m, the route "
+                        f"goes {left.route_intent}, {said}, it went {left.executed}"))
+    if moments:
+        return min(moments, key=lambda m: m[0])
     end = log.t[-1] if log.t else log.termination_t
     where = f" at {log.progress[-1]:.0f} m of {log.route_length:.0f} m" if log.progress else ""
     return end, f"{result.termination}{where}"
@@ -104,7 +128,9 @@ def _find(store: ResultStore, agent: str, route: str, family: str, k: int, seed:
 
 def _instructions(out: Path, rec: EpisodeRecord) -> Path:
     if rec.family == Family.ATTACK:
-        found = sorted((out / "attack").glob(f"*/{safe_name(rec.agent)}/{safe_name(rec.route_id)}.json"))
+        from .attack import agent_folder
+
+        found = sorted((out / "attack").glob(f"*/{agent_folder(rec.agent)}/{safe_name(rec.route_id)}.json"))
         if found:
             return found[0]
     path = out / "instructions" / f"{safe_name(rec.route_id)}.json"
@@ -135,15 +161,17 @@ def _scenario(out: Path, cfg: dict, route: str):
 def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: Path | None = None,
                  spec: str | None = None) -> ShowResult:
     """Re-simulate one stored episode of the evaluation folder ``out`` and write
-    ``dest/episode.mp4`` (``.avi`` where this OpenCV cannot write mp4) and ``dest/moment.png``
+    ``dest/episode.webm`` (:class:`icrsumo.render.VideoWriter`: another container only where
+    this OpenCV cannot write VP8) and ``dest/moment.png`` (:func:`failure_moment`)
     (default ``dest``: ``OUT/show/AGENT_ROUTE_FAMILY_K``). ``agent`` is the stored name; the
     agent is rebuilt from the spec the folder's configuration records for it (``spec``
     overrides: for folders written before icrsumo recorded specs)."""
     from .agents.identity import fingerprint, short
     from .agents.registry import PYTHON_PREFIX, agent_factory
+    from .decisions import classify_decisions
     from .evaluation.run import bind_agents, read_config
     from .guards.base import guarded_fingerprint
-    from .instructions.store import read_instruction_sets
+    from .instructions.store import read_route_file
     from .logs import dumps_log, loads_log
     from .render import write_image
     from .sim.episode import RunOptions, run_episode
@@ -151,7 +179,7 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
     out = Path(out)
     cfg = read_config(out)
     scoring = str(cfg.get("scoring") or "lb1")
-    with ResultStore(out / "results.sqlite") as store:
+    with ResultStore(out / "results.sqlite", readonly=True) as store:  # a read-only folder is fine
         rec = _find(store, agent, route, family, k, int(cfg["seed"]))
         if rec.status != EpisodeStatus.DONE:
             raise InputError(out / "results.sqlite", f"episode {agent}/{route}/{family}/{k}",
@@ -183,15 +211,21 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
                          "restore the agent's code or checkpoint as it was")
     sc = _scenario(out, cfg, route)
     instr_file = _instructions(out, rec)
-    sets = {(s.family, s.k): s for s in read_instruction_sets(instr_file)}
+    route_sets, maneuvers = read_route_file(instr_file)
+    sets = {(s.family, s.k): s for s in route_sets}
     iset = sets.get((rec.family, rec.k))
     if iset is None:
         raise InputError(instr_file, f"{family} k={k}", "the instruction sequence is missing",
                          "restore the out folder's instruction files")
-    moment_t, moment = failure_moment(stored, scoring)
-    dest = Path(dest) if dest is not None else out / "show" / safe_name(f"{agent}_{route}_{family}_{k}")
-    dest.mkdir(parents=True, exist_ok=True)
-    recorder = _Recorder(dest / "episode.mp4", moment_t)
+    moment_t, moment = failure_moment(stored, scoring, classify_decisions(maneuvers, iset, stored))
+    dest = Path(dest) if dest is not None else out / "show" / bounded_name(
+        safe_name(f"{agent}_{route}_{family}_{k}"))
+    try:
+        dest.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise InputError(dest, "", f"cannot be made for the video and still ({err.strerror or err})",
+                         "give a folder you can write to for them (dest)") from None
+    recorder = _Recorder(dest / "episode.webm", moment_t)
     log = run_episode(sc, iset, factory(), RunOptions(scoring=scoring), callbacks=[recorder],
                       guard=guards[1]() if guards is not None else None)
     still = dest / "moment.png"

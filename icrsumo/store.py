@@ -57,19 +57,38 @@ def _disk_full(err: sqlite3.Error, path: Path) -> bool:
     return st.f_bavail * st.f_frsize < _FULL_BELOW
 
 
+def _not_writable(err: sqlite3.Error, path: Path) -> bool:
+    """Whether SQLite failed because the store (or its folder, where SQLite makes its journal)
+    may not be written: SQLITE_READONLY, or SQLITE_CANTOPEN / an I/O error while the file or its
+    folder is not writable (a read-only disk, missing permissions)."""
+    code = getattr(err, "sqlite_errorcode", None)
+    primary = None if code is None else code & 0xFF
+    if primary == 8 or "readonly database" in str(err):
+        return True
+    if primary not in (10, 14) and "unable to open" not in str(err):
+        return False
+    path = Path(path)
+    return not os.access(path.parent, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK))
+
+
 class ResultStore:
     """Episode records (and compressed episode logs) keyed by (agent, route, family, k, seed)."""
 
-    def __init__(self, path: Path, verify: bool = True) -> None:
+    def __init__(self, path: Path, verify: bool = True, readonly: bool = False) -> None:
         """Open (or create) the store at ``path``; an existing file is checked first
         (``PRAGMA quick_check``, which reads every page: ``verify=False`` skips it for a store
-        that :meth:`check` has just passed)."""
+        that :meth:`check` has just passed). ``readonly``: open an existing store for reading
+        only, which also works in a folder this process may not write (a read-only disk or
+        copy); nothing is created or changed."""
         self.path = Path(path)
         existed = self.path.exists()
         if existed and not self.path.is_file():
             raise InputError(self.path, "", "is not a file", "move it away: the results store is a file")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._db = sqlite3.connect(str(self.path))
+        if readonly:
+            self._db = self._open_readonly()
+        else:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._db = sqlite3.connect(str(self.path))
         with self._guard("opening"):
             if existed:  # checked before anything is written to it (journal mode included)
                 bad = [r[0] for r in self._db.execute("PRAGMA quick_check")] if verify else ["ok"]
@@ -79,15 +98,43 @@ class ResultStore:
                 if tables and "episodes" not in tables:
                     shown = ", ".join(sorted(tables))[:80]
                     raise sqlite3.DatabaseError(f"no episodes table (tables: {shown})")
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA synchronous=FULL")
-            self._db.executescript(_SCHEMA)
-            self._db.commit()
+                if readonly and not tables:
+                    raise sqlite3.DatabaseError("no episodes table (an empty file)")
+            if not readonly:
+                self._db.execute("PRAGMA journal_mode=WAL")
+                self._db.execute("PRAGMA synchronous=FULL")
+                self._db.executescript(_SCHEMA)
+                self._db.commit()
             #: the episodes table's columns (a store written before ``outside_m`` or
             #: ``fingerprint`` lacks them until the first write adds them)
             self._cols = {r[1] for r in self._db.execute("PRAGMA table_info(episodes)")}
         #: agent name -> fingerprint of the agents this run drives (:meth:`claim_agents`)
         self._claimed: dict[str, str] = {}
+
+    def _open_readonly(self) -> sqlite3.Connection:
+        """A read-only connection (SQLite's ``mode=ro``). Where the folder cannot be written,
+        SQLite cannot make the files a reader of a WAL store needs, so the store is opened as
+        immutable: no other process can change it there either. A write-ahead log left beside
+        it (a run that was killed) holds episodes such an open would miss: an InputError."""
+        from urllib.parse import quote
+
+        if not self.path.is_file():
+            raise InputError(self.path, "", "the results store is missing",
+                             "give the out folder of an evaluation (it holds results.sqlite)")
+        uri = f"file:{quote(str(self.path.resolve()))}?mode=ro"
+        if not os.access(self.path.parent, os.W_OK | os.X_OK):
+            wal = self.path.with_name(self.path.name + "-wal")
+            if wal.is_file() and wal.stat().st_size > 0:
+                raise InputError(self.path, "opening", f"the folder is not writable and {wal.name} holds "
+                                 "episodes not yet merged into the store, which reading needs a writable "
+                                 "folder for", "make the folder writable (or copy it somewhere writable) "
+                                 "and run the command there")
+            uri += "&immutable=1"
+        try:
+            return sqlite3.connect(uri, uri=True)
+        except sqlite3.Error as err:
+            raise InputError(self.path, "opening", f"cannot be opened for reading ({err})",
+                             "check the file's permissions") from None
 
     @staticmethod
     def check(path: Path) -> None:
@@ -104,6 +151,11 @@ class ResultStore:
         except sqlite3.DatabaseError as err:
             with contextlib.suppress(sqlite3.Error):
                 self._db.close()
+            if _not_writable(err, self.path):
+                raise InputError(self.path, doing, "the results store or its folder is not writable "
+                                 "(read-only disk, or no write permission); the store itself is intact",
+                                 "make the folder and results.sqlite writable (or copy the folder somewhere "
+                                 "writable) and run the same command again") from None
             if _disk_full(err, self.path):
                 raise InputError(self.path, doing, "no space left on the disk that holds the results "
                                  "store (the store and every episode in it are intact)",
@@ -175,6 +227,25 @@ class ResultStore:
             if "" in old and name not in replace:
                 unmarked.append(name)
         return unmarked
+
+    def replaceable(self, fingerprints: Mapping[str, str],
+                    replace: Collection[str]) -> dict[str, tuple[int, tuple[str, ...]]]:
+        """Name -> (how many stored episodes :meth:`claim_agents` deletes for it, the
+        fingerprints they carry, "" for none) for every name in ``replace``: the episodes of the
+        name that another agent (not ``fingerprints[name]``) drove."""
+        out: dict[str, tuple[int, tuple[str, ...]]] = {}
+        with self._guard("reading"):
+            for name in replace:
+                if "fingerprint" in self._cols:
+                    rows = self._db.execute("SELECT fingerprint, COUNT(*) FROM episodes WHERE agent = ? AND "
+                                            "fingerprint IS NOT ? GROUP BY fingerprint",
+                                            (name, fingerprints.get(name, ""))).fetchall()
+                else:
+                    rows = self._db.execute("SELECT '', COUNT(*) FROM episodes WHERE agent = ?",
+                                            (name,)).fetchall()
+                rows = [(fp or "", n) for fp, n in rows if n]
+                out[name] = (sum(n for _, n in rows), tuple(sorted({fp for fp, _ in rows})))
+        return out
 
     def claim_agents(self, fingerprints: Mapping[str, str], replace: Collection[str] = ()) -> list[str]:
         """Check (:meth:`check_agents`), delete the stored episodes of the agents in ``replace``

@@ -102,8 +102,8 @@ FAMILY_DESCRIPTIONS: dict[Family, str] = {
     Family.AMBIGUITY: "the direction left out or vague (goal kept, harder to resolve)",
     Family.NOISE: "typos, case and punctuation noise (goal kept)",
     Family.MISLEADING: "a directive that contradicts the route (goal-conflicting)",
-    Family.BLANK: "control: no instruction text at all",
-    Family.SHUFFLED: "control: each instruction replaced by one of another maneuver",
+    Family.BLANK: "no instruction text at all",
+    Family.SHUFFLED: "each instruction replaced by one of another maneuver",
 }
 
 

@@ -3,6 +3,7 @@ docs site builds with MkDocs with every warning an error (broken links and ancho
 
 from __future__ import annotations
 
+import argparse
 import importlib.util
 import re
 import subprocess
@@ -37,3 +38,25 @@ def test_the_docs_site_builds_strictly(tmp_path):
     assert "Bring your own agent" in home and DEFAULT_AGENT in home
     api = (tmp_path / "site" / "api" / "index.html").read_text(encoding="utf-8")
     assert "{{" not in api and f"<code>{DEFAULT_AGENT}</code>" in api  # the placeholder, filled from the code
+
+
+def test_every_page_reads_right_on_a_code_host_and_its_names_come_from_the_code():
+    """No template placeholder (a code host shows it raw); the inline generated names are current."""
+    sync = _sync_names()
+    for page in sorted((ROOT / "docs").glob("*.md")):
+        text = page.read_text(encoding="utf-8")
+        assert "{{" not in text, f"{page.name}: write the text itself (tools/sync_names.py for names)"
+        assert sync.synced_page(text) == text, f"{page.name}: run python tools/sync_names.py"
+    assert "<!-- names:default_agent -->" in (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
+
+
+def test_the_evaluate_synopsis_names_every_option():
+    from icrsumo.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    flags = {o for a in sub.choices["evaluate"]._actions for o in a.option_strings if o.startswith("--")}
+    page = (ROOT / "docs" / "evaluate.md").read_text(encoding="utf-8")
+    synopsis = page.split("```")[1]
+    missing = sorted(f for f in flags - {"--help"} if not re.search(re.escape(f) + r"(?![\w-])", synopsis))
+    assert not missing, f"docs/evaluate.md's synopsis lacks {missing}"

@@ -75,8 +75,8 @@ def test_the_python_api_example_runs(tmp_path, converted, capsys):
         assert (out / name).is_file(), name
     config = json.loads((out / "config.json").read_text())
     agents = config.pop("agents")
-    assert config == {"suite": "tiny", "seed": 2026, "k": 1, "traffic": "normal", "scoring": "lb1",
-                      "converter": CONVERTER_VERSION}
+    assert config == {"run": "evaluate", "suite": "tiny", "seed": 2026, "k": 1, "traffic": "normal",
+                      "scoring": "lb1", "converter": CONVERTER_VERSION}
     assert {n: a["spec"] for n, a in agents.items()} == {"route-oracle": "route-oracle",
                                                          "instruction-follower": "instruction-follower"}
     assert all(a["fingerprint"].startswith("sha256:") for a in agents.values())

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import pytest
 
 from icrsumo.errors import InputError
-from icrsumo.routes import format_routes, read_routes
+from icrsumo.resources import bundled_suites
+from icrsumo.routes import check_route_selection, format_routes, read_routes, route_ids, suite_file
 
 
 def _write(tmp_path, text: str):
@@ -74,3 +78,78 @@ def test_format_roundtrip(tmp_path, data_dir):
         (r.id, r.town, len(r.waypoints), r.weather) for r in routes
     ]
     assert again[0].waypoints[0].x == pytest.approx(routes[0].waypoints[0].x, abs=0.005)
+
+
+def _icrsumo(*argv: str, cwd) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "icrsumo", *argv], cwd=cwd, capture_output=True, text=True,
+                          timeout=300)
+
+
+def _two_routes(tmp_path, town: str = "NoSuchTown"):
+    return _write(tmp_path, f"""<routes>
+      <route id="r_one" town="{town}"><waypoint x="1" y="2"/><waypoint x="3" y="4"/></route>
+      <route id="r_two" town="{town}"><waypoint x="1" y="2"/><waypoint x="3" y="4"/></route>
+    </routes>""")
+
+
+def test_a_mistyped_route_id_is_refused_before_the_suite_is_converted(tmp_path):
+    """The ids come from the route file: a typo is named with its closest ids before any route
+    is converted (here no route could be: their town does not exist, which a conversion would
+    report first), and nothing is written."""
+    routes, out = _two_routes(tmp_path), tmp_path / "out"
+    for command in ("evaluate", "attack"):
+        run = _icrsumo(command, "--suite", str(routes), "--routes", "r_one,r_tow", "--out", str(out),
+                       cwd=tmp_path)
+        err = run.stderr.strip().splitlines()
+        assert run.returncode == 2 and len(err) == 1, run.stderr
+        assert "--routes: 'r_tow': no such route in the suite" in err[0] and "did you mean r_two" in err[0]
+        assert "NoSuchTown" not in err[0] and not out.exists()
+    run = _icrsumo("evaluate", "--routes", "tiny_03", "--out", str(out), cwd=tmp_path)
+    assert run.returncode == 2 and "did you mean" in run.stderr and "tiny_003" in run.stderr
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("argv", [["evaluate", "--suite", "{arg}"], ["attack", "--suite", "{arg}"],
+                                  ["list", "routes", "--suite", "{arg}"], ["convert-routes", "{arg}"]])
+def test_a_missing_route_file_is_named_as_missing_not_as_an_unknown_suite(tmp_path, argv):
+    out = tmp_path / "out"
+    extra = ["--out", str(out)] if argv[0] != "list" else []
+    for arg in ("routes/mine.xml", "mine.xml"):
+        run = _icrsumo(*[a.format(arg=arg) for a in argv], *extra, cwd=tmp_path)
+        suites = ", ".join(bundled_suites())
+        err = run.stderr.strip().splitlines()
+        assert run.returncode == 2
+        assert err == [f"icrsumo: error: {arg}: no such route file (fix: check the path; or give a bundled "
+                       f"suite: {suites})"]
+    run = _icrsumo(*[a.format(arg="tinny") for a in argv], *extra, cwd=tmp_path)
+    assert run.returncode == 2 and "unknown suite (fix: did you mean tiny or train?" in run.stderr
+    assert not out.exists()
+
+
+def test_suite_file_and_route_ids(tmp_path):
+    routes = _two_routes(tmp_path)
+    assert suite_file(str(routes)) == routes and suite_file("tiny") == bundled_suites()["tiny"]
+    assert route_ids(routes) == ["r_one", "r_two"]
+    (tmp_path / "conv").mkdir()
+    (tmp_path / "conv" / "index.json").write_text("{}")
+    assert suite_file(str(tmp_path / "conv"), folders=True) is None
+    with pytest.raises(InputError, match="is a folder, not a route XML file"):
+        suite_file(str(tmp_path / "conv"))
+    check_route_selection(["r_two"], ["r_one", "r_two"], "routes", "mine")
+    with pytest.raises(InputError, match=r"routes: 'x': no such route in the suite mine \(fix: use the"):
+        check_route_selection(["r_one", "x"], ["r_one", "r_two"], "routes", "mine")
+
+
+def test_the_python_api_checks_the_suite_and_its_route_ids_before_converting(tmp_path):
+    """``icrsumo.evaluate`` names a mistyped route id and a missing route file in its own field
+    words, before any route is converted, and writes nothing."""
+    import icrsumo
+
+    routes, out = _two_routes(tmp_path), tmp_path / "out"
+    with pytest.raises(InputError, match=r"^routes: 'r_tow': no such route in the suite .*did you mean r_tw"):
+        icrsumo.evaluate(suite=str(routes), routes=["r_one", "r_tow"], out=str(out))
+    with pytest.raises(InputError, match=r"rollout_route: 'r_three': no such route"):
+        icrsumo.evaluate(suite=str(routes), routes=["r_one"], rollout_route="r_three", out=str(out))
+    with pytest.raises(InputError, match=r"no such route file"):
+        icrsumo.evaluate(suite=str(tmp_path / "mine.xml"), out=str(out))
+    assert not out.exists()

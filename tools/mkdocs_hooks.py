@@ -1,31 +1,17 @@
-"""MkDocs hooks of the docs site (``mkdocs build --strict``): names that can drift are taken
-from the code, never typed twice.
+"""MkDocs hooks of the docs site (``mkdocs build --strict``).
 
-* ``{{ readme }}`` (the home page): the README, its ``docs/`` links made relative to the site;
-* ``{{ default_agent }}``, ``{{ suites }}``, ``{{ families }}``, ``{{ control_families }}``,
-  ``{{ agents }}``: from :mod:`icrsumo.defaults`, the bundled suites, :mod:`icrsumo.vocab` and
-  the agent registry. An unknown ``{{ name }}`` stops the build.
+* The home page (``docs/index.md``, which on a code host links to the README) is the README,
+  its ``docs/`` links made relative to the site.
+* No page may hold a template placeholder ``{{ ... }}``: the names that can drift are written
+  into the pages by ``python tools/sync_names.py`` (checked by tests/test_docs.py), so every page
+  reads the same on a code host as on the site. A placeholder stops the build.
 """
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
-_PLACEHOLDER = re.compile(r"\{\{ (\w+) \}\}")
-
-
-def names() -> dict[str, str]:
-    """Placeholder -> its text, from the code."""
-    from icrsumo.agents.registry import DEFAULT_AGENT, REGISTRY
-    from icrsumo.resources import bundled_suites
-    from icrsumo.vocab import CONTROL_FAMILIES, FAMILIES
-
-    def code(items) -> str:
-        return ", ".join(f"`{x}`" for x in items)
-
-    return {"default_agent": f"`{DEFAULT_AGENT}`", "suites": code(bundled_suites()),
-            "families": code(FAMILIES), "control_families": code(CONTROL_FAMILIES), "agents": code(REGISTRY)}
+HOME = "index.md"
 
 
 def readme(root: Path) -> str:
@@ -36,14 +22,9 @@ def readme(root: Path) -> str:
 
 
 def on_page_markdown(markdown: str, page, config, files) -> str:  # noqa: ARG001 - MkDocs' signature
-    if "{{ readme }}" in markdown:
-        markdown = markdown.replace("{{ readme }}", readme(Path(config["config_file_path"]).parent))
-    known = names()
-
-    def sub(m: re.Match) -> str:
-        if m.group(1) not in known:
-            raise ValueError(f"{page.file.src_path}: unknown placeholder {m.group(0)} "
-                             f"(known: {', '.join(known)})")
-        return known[m.group(1)]
-
-    return _PLACEHOLDER.sub(sub, markdown)
+    if page.file.src_path == HOME:
+        return readme(Path(config["config_file_path"]).parent)
+    if "{{" in markdown:
+        raise ValueError(f"{page.file.src_path}: holds a template placeholder {{{{ ... }}}}: write the "
+                         "text itself (names from the code: an inline span of tools/sync_names.py)")
+    return markdown

@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError, describe
-from ..procs import die_with_parent
+from ..procs import die_with_parent, spawn_context
 from .base import AgentError, EpisodeInfo, Observation
 from .batching import TASK_KINDS, BatchingCore, Task
 from .registry import agent_factory, agent_name
@@ -138,7 +138,7 @@ def start_server(spec: str, device: str, max_batch: int = 32, key: bytes | None 
     key = key if key is not None else secrets.token_bytes(32)
     folder = tempfile.TemporaryDirectory(prefix="icrsumo-batch-")  # mode 0700
     address = str(Path(folder.name) / "agent.sock")
-    ctx = multiprocessing.get_context("spawn")
+    ctx = spawn_context()
     control, child = ctx.Pipe()
     proc = ctx.Process(target=_serve, args=(spec, address, key, device, max_batch, child, os.getpid()),
                        name=f"icrsumo-batch-{name}", daemon=True)

@@ -25,7 +25,10 @@ which names the model): a rerun, a resume, ``icrsumo show`` and ``icrsumo attack
 are answered from it without a server and give byte-identical episodes.
 
 Spec: ``llm:MODEL@URL[?key_env=VAR&image=1&format=json_object&timeout=S&seed=N]``; the API key
-is read from the environment variable ``key_env`` names (never from the command line).
+is read from the environment variable ``key_env`` names (never from the command line). The key
+(or a password in the URL) goes to the URL's own origin only, and is redacted from whatever the
+server sends back (:mod:`icrsumo.llmio`). A response that is not an OpenAI-compatible answer (an
+HTML page) is a server fault, never the model's answer: it is not cached.
 """
 
 from __future__ import annotations
@@ -43,11 +46,11 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError, check_key_env
+from ..errors import InputError, check_key_env, check_key_text, display_url
 from ..llmio import (
     Invalid,
     ResponseCache,
-    TooLarge,
+    ServerFault,
     Transport,
     answer_text,
     canonical,
@@ -55,8 +58,10 @@ from ..llmio import (
     exchange,
     http_problem,
     is_http,
+    models_url,
     request_hash,
     served_models,
+    unwritable,
 )
 from ..types import Intent, ModelCall
 from .base import Action, AgentError, EpisodeInfo, Observation, World
@@ -84,7 +89,7 @@ STOP_HOLD_S = 5.0
 STANDING = 0.1
 #: tokens an answer may have (the JSON answer needs about 10)
 MAX_TOKENS = 32
-#: bytes of a response body read at most; a larger one is an invalid answer
+#: bytes of a response body read at most; a larger one is a server fault
 MAX_ANSWER_BYTES = 64 << 10
 #: characters of an answer kept in the episode log
 LOGGED_ANSWER = 500
@@ -120,10 +125,11 @@ _BRANCH_ORDER = ("left", "straight", "right", "u-turn")
 class LLMSettings:
     """How an LLM agent asks. ``endpoint``: the API base URL (``http://127.0.0.1:8080/v1``);
     ``key_env``: the environment variable holding the API key ("" none); ``image``: send the BEV
-    raster as a PNG image part; ``format``: one of :data:`FORMATS`; ``timeout`` (s) bounds each
-    request; ``seed``: sent with every request; ``cache_dir``: the response cache (None: answers
-    are kept in memory only); ``offline``: the server was unreachable when the run began (a
-    request not in the cache then crashes its episode with that reason)."""
+    raster as a PNG image part; ``format``: one of :data:`FORMATS`; ``timeout`` (s): the deadline
+    of each whole request (connect, headers and body); ``seed``: sent with every request;
+    ``cache_dir``: the response cache (None: answers are kept in memory only); ``offline``: the
+    server was unreachable when the run began (a request not in the cache then crashes its
+    episode with that reason)."""
 
     model: str
     endpoint: str
@@ -206,7 +212,7 @@ def api_key(s: LLMSettings, option: str = "--agent") -> str | None:
     if not key.strip():
         raise InputError(option, s.name, f"the API key variable {s.key_env} is not set",
                          f"export {s.key_env}=... before the run, or drop key_env for a server without a key")
-    return key.strip()
+    return check_key_text(key.strip(), s.key_env, option, s.name)
 
 
 # --------------------------------------------------------------------------- the scene
@@ -280,6 +286,8 @@ def parse_answer(content: str) -> Intent:
     """The maneuver of an answer text: a JSON object (bare or in a ```json fence) whose
     ``maneuver`` is one of :data:`MENU`; :class:`Invalid` saying what is wrong otherwise."""
     text = content.strip()
+    if not text:
+        raise Invalid(["answer is empty"])
     try:
         obj = json.loads(text)
     except (ValueError, RecursionError):
@@ -302,7 +310,7 @@ def parse_answer(content: str) -> Intent:
 @dataclass(frozen=True)
 class Answer:
     """A model's answer to one request: the ``maneuver`` (follow when invalid), ``valid``, the
-    answer ``text`` ("" when the response had none) and the ``problem`` of an invalid one."""
+    answer ``text`` ("" when the model said nothing) and the ``problem`` of an invalid one."""
 
     maneuver: Intent
     valid: bool
@@ -311,10 +319,8 @@ class Answer:
 
 
 def answer_of(record: dict) -> Answer:
-    """The :class:`Answer` of a cache record (``content`` or ``problem``)."""
-    content = record.get("content")
-    if not isinstance(content, str):
-        return Answer(Intent.FOLLOW, False, "", str(record.get("problem") or "no answer text"))
+    """The :class:`Answer` of a cache record (its ``content``: the model's answer text)."""
+    content = str(record["content"])
     try:
         return Answer(parse_answer(content), True, content)
     except Invalid as err:
@@ -325,7 +331,8 @@ def answer_of(record: dict) -> Answer:
 @dataclass
 class Asker:
     """Answers requests from the response cache, else from the server (one request at a time,
-    bounded in time and size). Transport failures that persist raise :class:`AgentError`."""
+    bounded in time and size). Transport failures and server faults that persist raise
+    :class:`AgentError`; only the model's answers (``content``) are cached."""
 
     settings: LLMSettings
     key: str | None = None
@@ -343,11 +350,13 @@ class Asker:
         return key, answer_of(rec)
 
     def record(self, body: dict) -> tuple[str, dict]:
-        """(cache key, cache record: ``content`` or ``problem``) of the request ``body``."""
+        """(cache key, cache record: the answer's ``content``) of the request ``body``."""
         key = request_hash(body)
         rec = self.memory.get(key)
         if rec is None and self.cache is not None:
             rec = self.cache.get(key, body)
+            if rec is not None and not isinstance(rec.get("content"), str):
+                rec = None   # a server fault an earlier icrsumo stored as an answer: ask again
         if rec is not None:
             self.hits += 1
         else:
@@ -365,25 +374,19 @@ class Asker:
             if attempt:
                 time.sleep(RETRY_BACKOFF * attempt)
             try:
-                status, raw = exchange(url, canonical(body), api_key=self.key, timeout=s.timeout,
-                                       limit=MAX_ANSWER_BYTES)
-            except TooLarge as err:
-                return {"content": None, "problem": str(err)}
+                reply = exchange(url, canonical(body), api_key=self.key, timeout=s.timeout,
+                                 limit=MAX_ANSWER_BYTES)
+                self.sent += 1
+                if reply.status == 200:
+                    return {"content": answer_text(reply)[0]}
             except Transport as err:
                 problem = f"timed out after {s.timeout:g} s" if str(err) == "timed out" else str(err)
                 continue
-            self.sent += 1
-            if status == 200:
-                try:
-                    content, _ = answer_text(raw)
-                except Invalid as err:
-                    return {"content": None, "problem": err.summary}
-                return {"content": content}
-            problem = http_problem(status, raw)
-            if 400 <= status < 500 and status not in (408, 429):
+            problem = http_problem(reply)
+            if 400 <= reply.status < 500 and reply.status not in (408, 429):
                 break
         where = " (the run began with it unreachable: answers came from the cache only)" if s.offline else ""
-        raise AgentError(f"LLM server {url} for model {s.model}: {problem}{where}")
+        raise AgentError(f"LLM server {display_url(url)} for model {s.model}: {problem}{where}")
 
 
 # --------------------------------------------------------------------------- the agent
@@ -545,12 +548,8 @@ class LLMFactory:
                                    "prompt": PROMPT_VERSION}, sort_keys=True))
 
     def bind(self, out: Path) -> LLMFactory:
-        """A factory whose agents keep their answers in ``out/llm-cache``, after checking the
-        API key variable and the server (:func:`check_server`); a server that is unreachable
-        is accepted when that cache holds answers (the run is then answered from it)."""
-        cache_dir = Path(out) / "llm-cache"
-        offline = check_server(self.settings, has_cache=len(ResponseCache(cache_dir)) > 0)
-        return LLMFactory(replace(self.settings, cache_dir=cache_dir, offline=offline))
+        """A factory whose agents keep their answers in ``out/llm-cache`` (:func:`bound`)."""
+        return LLMFactory(bound(self.settings, out))
 
     def __call__(self) -> LLMFollower:
         if not self._checked:   # an agent made outside an evaluation (check-agent, the env)
@@ -559,22 +558,41 @@ class LLMFactory:
         return LLMFollower(self.settings)
 
 
+def bound(s: LLMSettings, out: Path, option: str = "--agent") -> LLMSettings:
+    """``s`` keeping its answers in ``out/llm-cache``, after checking (before any episode runs)
+    that answers can be stored there and :func:`check_server`; a server that is unreachable is
+    accepted when that cache holds answers (the run is then answered from it)."""
+    cache_dir = Path(out) / "llm-cache"
+    why = unwritable(cache_dir)
+    if why:
+        raise InputError(cache_dir, "", f"the LLM response cache cannot be written: {why}",
+                         "make it writable (or move the file out of the way), or use another out folder")
+    offline = check_server(s, len(ResponseCache(cache_dir)) > 0, option)
+    return replace(s, cache_dir=cache_dir, offline=offline)
+
+
 def check_server(s: LLMSettings, has_cache: bool, option: str = "--agent") -> bool:
-    """Check the API key variable and that the server answers and serves ``s.model``;
-    InputErrors naming ``option`` and the fix. Returns True (offline) when the server is
-    unreachable but ``has_cache`` (the run is answered from the cache)."""
+    """Check the API key variable and that the server answers (within ``s.timeout``) as an
+    OpenAI-compatible server and serves ``s.model``; InputErrors naming ``option`` and the fix.
+    Returns True (offline) when the server is unreachable but ``has_cache`` (the run is
+    answered from the cache)."""
     key = api_key(s, option)
     start = "start it (e.g. icrsumo serve-llm --port 8080 for SmolLM2), or fix the URL"
+    endpoint = display_url(s.endpoint)
     try:
-        models = served_models(s.endpoint, api_key=key, timeout=min(s.timeout, 10.0))
+        models = served_models(s.endpoint, api_key=key, timeout=s.timeout)
+    except ServerFault as err:
+        raise InputError(option, s.name, f"the LLM server {display_url(models_url(s.endpoint))} {err}",
+                         "give the URL of an OpenAI-compatible API (it usually ends in /v1)") from None
     except Transport as err:
         if err.unreachable and has_cache:
             return True
-        raise InputError(option, s.name, f"the LLM server {s.endpoint} does not answer ({err})",
+        why = f"timed out after {s.timeout:g} s" if str(err) == "timed out" else str(err)
+        raise InputError(option, s.name, f"the LLM server {endpoint} does not answer ({why})",
                          start if err.unreachable else "check the server and its API key") from None
     if models is not None and s.model not in models:
         shown = ", ".join(models[:8]) + (", ..." if len(models) > 8 else "")
-        raise InputError(option, s.name, f"the LLM server {s.endpoint} does not serve model {s.model!r} "
+        raise InputError(option, s.name, f"the LLM server {endpoint} does not serve model {s.model!r} "
                          f"(it serves: {shown or 'none'})", "name a model it serves after llm:")
     return False
 

@@ -31,6 +31,7 @@ from typing import Any
 from ..defaults import DEFAULT_AGENT as _DEFAULT
 from ..errors import InputError
 from .base import Agent
+from .identity import PATH_MODULE_PREFIX
 
 #: ``remote:http://HOST:PORT``: an agent behind an icrsumo-agent/1 server (icrsumo.agents.remote)
 REMOTE_PREFIX = "remote:"
@@ -132,8 +133,12 @@ def _load_target(name: str, entry: AgentEntry, option: str = "--agent") -> Calla
         obj = importlib.import_module(module)
         for part in attr.split("."):
             obj = getattr(obj, part)
-    except Exception as err:  # noqa: BLE001 - the plugin's (or our) module failed to import
-        raise InputError(option, name, f"cannot load {entry.target}{where} ({type(err).__name__}: {err})",
+    except BaseException as err:  # noqa: BLE001 - the plugin's (or our) module failed to import, or
+        # raised SystemExit / KeyboardInterrupt in its body (as load_class: never a run that ends
+        # silently having done nothing)
+        why = f"{type(err).__name__}: {err}" if not isinstance(err, SystemExit) else \
+            f"its import called sys.exit({err.code!r})"
+        raise InputError(option, name, f"cannot load {entry.target}{where} ({why})",
                          "reinstall the package that provides it, or fix its module") from None
     if not callable(obj):
         raise InputError(option, name, f"{entry.target}{where} is not callable", "name the class")
@@ -150,6 +155,7 @@ register = REGISTRY.register
 unregister = REGISTRY.unregister
 #: registered name -> factory (the registry as a read-only mapping; the name older callers use)
 BUILTIN: Mapping[str, Callable[..., Agent]] = REGISTRY
+
 
 #: the shipped checkpoints' folder (found without importing the learned agents)
 CHECKPOINTS_DIR = Path(__file__).resolve().parents[1] / "learn" / "checkpoints"
@@ -240,7 +246,7 @@ def load_class(spec: str) -> type:
             if not path.is_file():
                 problem = "is a folder, not an agent file" if path.is_dir() else "agent file not found"
                 raise InputError(path, "", problem, "check the path before ':'")
-            name = f"icrsumo_user_agent_{abs(hash(str(path.resolve())))}"
+            name = f"{PATH_MODULE_PREFIX}{abs(hash(str(path.resolve())))}"
             mod_spec = importlib.util.spec_from_file_location(name, path)
             module = importlib.util.module_from_spec(mod_spec)
             sys.modules[name] = module

@@ -25,9 +25,12 @@ request                body                                        answer (200)
 Any other status carries ``{"error": "..."}`` in plain words (400 malformed request, 404
 unknown path or session, 422 the agent's action broke the protocol, 500 the agent raised). The
 client turns every failure into one line: :class:`AgentTimeout` ("agent did not answer within
-N s") when the server is slower than the per-request timeout, :class:`AgentError` when the
-server is down, answers with an error or with malformed data; an unreachable server at
-planning time is an :class:`icrsumo.errors.InputError` (exit status 2).
+N s") when the server is slower than the per-request timeout (a deadline for the whole request,
+however slowly the answer trickles in), :class:`AgentError` when the server is down, answers
+with an error or with malformed data; an unreachable server at planning time is an
+:class:`icrsumo.errors.InputError` (exit status 2). The shared key (``?key_env=VAR``) or a
+password in the URL (sent as HTTP Basic) goes to that server only (redirects are not followed)
+and is redacted from what the server sends back; the URL is shown without its password.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ import http.client
 import json
 import os
 import socket
+import time
 import uuid
 import zlib
 from dataclasses import asdict
@@ -47,7 +51,8 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 
 from ..dynamics import Control
-from ..errors import InputError, check_key_env
+from ..errors import InputError, check_key_env, check_key_text, display_url
+from ..llmio import authorization, redact, secrets_of
 from .base import Action, AgentError, AgentTimeout, EpisodeInfo, Observation
 
 PROTOCOL = "icrsumo-agent/1"
@@ -211,15 +216,46 @@ def shared_key(var: str, option: str, value: str) -> str:
     if not key:
         raise InputError(option, value, f"the shared key variable {var} is not set",
                          f"export {var}=... (the same key on both sides) before starting")
-    return key
+    return check_key_text(key, var, option, value)
+
+
+class _DeadlineSocket(socket.socket):
+    """A socket whose every send and receive gets only the time left until ``deadline`` (a
+    ``time.monotonic()`` instant; TimeoutError once it has passed), so a whole request ends by
+    then however slowly the answer trickles in (no watchdog thread on the per-step path)."""
+
+    deadline = float("inf")
+
+    def _time_left(self) -> None:
+        left = self.deadline - time.monotonic()
+        if left <= 0:
+            raise TimeoutError("timed out")
+        self.settimeout(left)
+
+    def recv_into(self, *args: Any) -> int:
+        self._time_left()
+        return super().recv_into(*args)
+
+    def sendall(self, *args: Any) -> None:
+        self._time_left()
+        super().sendall(*args)
+
+
+def _deadline_socket(address: tuple[str, int], timeout: float, *args: Any) -> _DeadlineSocket:
+    """``socket.create_connection``, as a :class:`_DeadlineSocket`."""
+    sock = socket.create_connection(address, timeout, *args)
+    return _DeadlineSocket(sock.family, sock.type, sock.proto, sock.detach())
 
 
 class _Connection:
-    """One keep-alive HTTP/1.1 connection; every failure becomes an AgentError / AgentTimeout."""
+    """One keep-alive HTTP/1.1 connection; every failure becomes an AgentError / AgentTimeout.
+    Each request has ``timeout`` s in all; the credentials (the shared ``key``, else the URL's
+    password) go to this host only and are redacted from the server's answers."""
 
     def __init__(self, url: str, host: str, port: int, timeout: float, key: str | None = None) -> None:
         self.url, self.host, self.port, self.timeout = url, host, port, timeout
-        self.key = key
+        self.auth = authorization(url, key)
+        self.secrets = secrets_of(url, key)
         self.conn: http.client.HTTPConnection | None = None
 
     def close(self) -> None:
@@ -227,19 +263,26 @@ class _Connection:
             self.conn.close()
             self.conn = None
 
+    def _exchange(self, method: str, path: str, body: bytes | None) -> tuple[int, bytes]:
+        """(status, body) of one request, all of it within ``timeout`` s (TimeoutError past it)."""
+        deadline = time.monotonic() + self.timeout
+        if self.conn is None:
+            self.conn = http.client.HTTPConnection(self.host, self.port, timeout=self.timeout)
+            self.conn._create_connection = _deadline_socket   # type: ignore[attr-defined]
+            self.conn.connect()
+            self.conn.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.conn.sock.deadline = deadline
+        headers = {"Content-Type": "application/json"} if body is not None else {}
+        if self.auth is not None:
+            headers["Authorization"] = self.auth
+        self.conn.request(method, path, body=body, headers=headers)
+        resp = self.conn.getresponse()
+        return resp.status, redact(resp.read(), self.secrets)
+
     def request(self, method: str, path: str, body: bytes | None = None) -> dict[str, Any]:
-        where = f"remote agent at {self.url}"
+        where = f"remote agent at {display_url(self.url)}"
         try:
-            if self.conn is None:
-                self.conn = http.client.HTTPConnection(self.host, self.port, timeout=self.timeout)
-                self.conn.connect()
-                self.conn.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            headers = {"Content-Type": "application/json"} if body is not None else {}
-            if self.key is not None:
-                headers["Authorization"] = f"Bearer {self.key}"
-            self.conn.request(method, path, body=body, headers=headers)
-            resp = self.conn.getresponse()
-            raw = resp.read()
+            status, raw = self._exchange(method, path, body)
         except TimeoutError:
             self.close()
             raise AgentTimeout(f"agent did not answer within {self.timeout:g} s ({where}, {path})") from None
@@ -249,16 +292,21 @@ class _Connection:
                              f"running there?") from None
         except (OSError, http.client.HTTPException) as err:
             self.close()
-            raise AgentError(f"{where}: connection failed ({type(err).__name__}: {err})") from None
+            raise AgentError(f"{where}: connection failed ({type(err).__name__}: "
+                             f"{redact(str(err), self.secrets)})") from None
+        if 300 <= status < 400:
+            raise AgentError(f"{where} answered HTTP {status}, a redirect, which is not followed "
+                             "(credentials go to the URL's own server only): give the server's own address")
         try:
             doc = json.loads(raw)
         except ValueError:
-            raise AgentError(f"{where} answered malformed data: not JSON (HTTP {resp.status}, "
+            raise AgentError(f"{where} answered malformed data: not JSON (HTTP {status}, "
                              f"{raw[:60]!r})") from None
         if not isinstance(doc, dict):
             raise AgentError(f"{where} answered malformed data: not a JSON object")
-        if resp.status != 200:
-            raise AgentError(f"{where}: {doc.get('error') or f'HTTP {resp.status}'}")
+        if status != 200:
+            error = redact(str(doc.get("error") or ""), self.secrets)
+            raise AgentError(f"{where}: {error or f'HTTP {status}'}")
         if doc.get("protocol") != PROTOCOL:
             raise AgentError(f"{where} answered malformed data: protocol {doc.get('protocol')!r}, "
                              f"expected {PROTOCOL!r}")
@@ -290,7 +338,8 @@ class RemoteAgent:
         try:
             return decode_action(doc.get("action"))
         except ProtocolError as err:
-            raise AgentError(f"remote agent at {self.url} answered malformed data: {err}") from None
+            raise AgentError(f"remote agent at {display_url(self.url)} answered malformed data: "
+                             f"{redact(str(err), self._conn.secrets)}") from None
 
     def close(self) -> None:
         """End the session on the server (best effort) and the connection."""
@@ -327,7 +376,8 @@ class RemoteFactory:
         fp = info.get("fingerprint")
         #: the server's own account of its agent (``GET /info``'s ``fingerprint``); a server that
         #: gives none is known by its agent's name and address only
-        self.fingerprint = fp if isinstance(fp, str) and fp.strip() else f"remote {name} at {url}"
+        self.fingerprint = fp if isinstance(fp, str) and fp.strip() else \
+            f"remote {name} at {display_url(url)}"
 
     def __call__(self) -> RemoteAgent:
         return RemoteAgent(self.url, self.name, self.timeout)

@@ -1,5 +1,7 @@
-"""How an agent's calls are guarded against hanging: one :class:`CallWatch` protocol, given
-explicitly to whoever calls the agent (an evaluation's episode worker, ``check-agent``).
+"""How an agent's calls (and an instruction guard's) are guarded against hanging: one
+:class:`CallWatch` protocol, given explicitly to whoever calls the agent (an evaluation's episode
+worker, ``check-agent``). ``who`` names the caller in a timeout: ``"agent"``, or ``"guard NAME"``
+for a guard's ``reset`` / ``check`` (:class:`~icrsumo.guards.base.GuardTimeout`).
 
 * :class:`Unwatched`: no limit (``--agent-timeout 0``, or one in-process worker without one);
 * :class:`SlotWatch`: a local pool worker marks when its current call began in a shared slot;
@@ -24,38 +26,57 @@ from typing import Any, Protocol
 
 from .base import AgentTimeout
 
+#: the caller of an agent's own calls
+AGENT = "agent"
 
-def timeout_message(timeout: float) -> str:
-    """The words of every agent-call timeout."""
-    return f"agent did not answer within {timeout:g} s"
+
+def timeout_message(timeout: float, who: str = AGENT) -> str:
+    """The words of every agent-call (or guard-call: ``who``) timeout."""
+    return f"{who} did not answer within {timeout:g} s"
+
+
+def timeout_error(timeout: float, who: str = AGENT) -> AgentTimeout:
+    """The exception of a call of ``who`` that overran ``timeout`` s: an
+    :class:`AgentTimeout`, a :class:`~icrsumo.guards.base.GuardTimeout` for a guard's."""
+    from ..guards.base import GuardTimeout
+
+    return (AgentTimeout if who == AGENT else GuardTimeout)(timeout_message(timeout, who))
 
 
 class CallWatch(Protocol):
-    """Runs one agent call ``fn(arg)`` under a time limit."""
+    """Runs one call ``fn(arg)`` of ``who`` under a time limit."""
 
-    def call(self, fn: Callable[[Any], Any], arg: Any) -> Any: ...
+    def call(self, fn: Callable[[Any], Any], arg: Any, who: str = AGENT) -> Any: ...
 
 
 class Unwatched:
     """Calls without a limit."""
 
-    def call(self, fn: Callable[[Any], Any], arg: Any) -> Any:
+    def call(self, fn: Callable[[Any], Any], arg: Any, who: str = AGENT) -> Any:
         return fn(arg)
 
 
 class SlotWatch:
-    """Marks ``time.monotonic()`` in ``slot`` (a shared double, 0.0: no call) while a call runs;
-    the parent enforces the limit (:func:`overran`)."""
+    """Marks ``time.monotonic()`` in ``slot`` (a shared double, 0.0: no call) while a call runs,
+    and in ``caller`` (a shared int, optional) whether it is the agent's (0) or its guard's (1);
+    the parent enforces the limit (:func:`overran`) and names the caller (:func:`overran_by`)."""
 
-    def __init__(self, slot: Any) -> None:
-        self.slot = slot
+    def __init__(self, slot: Any, caller: Any = None) -> None:
+        self.slot, self.caller = slot, caller
 
-    def call(self, fn: Callable[[Any], Any], arg: Any) -> Any:
+    def call(self, fn: Callable[[Any], Any], arg: Any, who: str = AGENT) -> Any:
+        if self.caller is not None:
+            self.caller.value = 0 if who == AGENT else 1
         self.slot.value = time.monotonic()
         try:
             return fn(arg)
         finally:
             self.slot.value = 0.0
+
+
+def overran_by(caller: Any, guard: str) -> str:
+    """``who`` of the call a :class:`SlotWatch` marked in ``caller``: the agent, or ``guard``."""
+    return f"guard {guard}" if caller is not None and caller.value == 1 and guard else AGENT
 
 
 def overran(slot: Any, timeout: float, now: float) -> bool:
@@ -71,14 +92,14 @@ class AlarmWatch:
     def __init__(self, timeout: float | None) -> None:
         self.timeout = timeout
 
-    def call(self, fn: Callable[[Any], Any], arg: Any) -> Any:
+    def call(self, fn: Callable[[Any], Any], arg: Any, who: str = AGENT) -> Any:
         timeout = self.timeout
         if timeout is None or not hasattr(signal, "SIGALRM") \
                 or threading.current_thread() is not threading.main_thread():
             return fn(arg)
 
         def expired(signum, frame):
-            raise AgentTimeout(timeout_message(timeout))
+            raise timeout_error(timeout, who)
 
         old = signal.signal(signal.SIGALRM, expired)
         signal.setitimer(signal.ITIMER_REAL, timeout)

@@ -3,8 +3,9 @@
 For every agent and route: the baseline sequence and K variants of each selected family, all
 on the same scenario, seed and traffic. The out folder holds everything (reused on rerun):
 
-    OUT/config.json         suite, seed, k, traffic, scoring, the converter's version (and the
-                            --baseline-bank file's SHA-256): a rerun with another one is refused
+    OUT/config.json         the run (evaluate, or attack and its constraint), suite, seed, k,
+                            traffic, scoring, the converter's version (and the --baseline-bank
+                            file's SHA-256): a rerun with another one is refused
     OUT/scenarios/          convert-routes output
     OUT/instructions/       generate output
     OUT/results.sqlite      one row per finished episode (committed at once): resumable
@@ -18,7 +19,9 @@ Hung agents: every ``reset`` / ``act`` call has ``agent_timeout`` seconds (``--a
 default 60). The local backend's parent process watches each worker's current agent call and
 kills and replaces a worker whose call overruns (this stops any hang, also in C code); Ray
 workers interrupt the call with SIGALRM (hangs in Python code). The episode is stored as
-crashed with "agent did not answer within N s", without a retry, and the run goes on.
+crashed with "agent did not answer within N s", without a retry, and the run goes on. An
+instruction guard's ``reset`` / ``check`` calls have the same limit, watched the same way
+("guard NAME did not answer within N s").
 
 Modules, one job each:
 

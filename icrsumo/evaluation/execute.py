@@ -15,6 +15,7 @@ from ..agents.base import Agent, AgentTimeout
 from ..agents.registry import agent_factory
 from ..agents.watch import CallWatch, Unwatched
 from ..errors import Interrupted, describe
+from ..guards.base import split_row
 from ..scenario import Scenario
 from ..types import EpisodeLog, EpisodeRecord, EpisodeResult, InstructionSet
 from ..vocab import EpisodeStatus, ErrorKind, OutcomeStatus, Verdict
@@ -77,6 +78,34 @@ class WatchedAgent:
                 self._agent.close()
 
 
+class WatchedGuard:
+    """An instruction guard whose ``reset`` / ``check`` calls run under ``watch``, as the
+    agent's do (a guard that hangs stops its episode as a hung agent does: stored as crashed,
+    "guard NAME did not answer within N s"); ``name`` and ``needs_plan`` are the guard's.
+    ``row_name``: the guard's name in its rows (what a timeout names)."""
+
+    def __init__(self, guard: object, watch: CallWatch, row_name: str) -> None:
+        self._guard, self._watch = guard, watch
+        self.name = str(getattr(guard, "name", type(guard).__name__))
+        self.needs_plan = bool(getattr(guard, "needs_plan", False))
+        self._who = f"guard {row_name}"
+
+    def __getattr__(self, attr: str) -> Any:  # anything else is the guard's own
+        return getattr(self.__dict__["_guard"], attr)
+
+    def reset(self, info):
+        return self._watch.call(self._guard.reset, info, who=self._who)
+
+    def check(self, text, context):
+        return self._watch.call(lambda args: self._guard.check(*args), (text, context), who=self._who)
+
+
+def row_guard(job: Job) -> str:
+    """The name of ``job``'s guard in its row (``AGENT+guard:NAME``; "" for none)."""
+    parts = split_row(job.agent) if job.guard else None
+    return parts[1] if parts else job.guard
+
+
 class EpisodeWorker:
     """Runs jobs one at a time in one process, with its agents' calls under ``watch``. Keeps
     the agent factory of each spec (or each job factory) it has met, so user code is imported
@@ -114,7 +143,8 @@ class EpisodeWorker:
         return factory
 
     def guard(self, job: Job) -> object | None:
-        """A fresh guard for ``job`` (None without one); its factory is kept per spec."""
+        """A fresh guard for ``job`` (None without one), its calls under the worker's watch;
+        its factory is kept per spec."""
         if not job.guard:
             return None
         ref: Hashable = job.guard_factory if job.guard_factory is not None else job.guard
@@ -123,7 +153,7 @@ class EpisodeWorker:
             from ..guards.registry import guard_factory
 
             factory = self.guards[ref] = job.guard_factory or guard_factory(job.guard)
-        return factory()
+        return WatchedGuard(factory(), self.watch, row_guard(job))
 
     def run(self, job: Job) -> Outcome:
         """Run one episode and score it; every failure becomes an Outcome."""

@@ -8,6 +8,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import replace
 from typing import Any
 
+from ..errors import visible
 from .options import EvalOptions
 from .plan import Job
 
@@ -48,7 +49,7 @@ def stop_inference(opts: EvalOptions, servers: Mapping[str, Any]) -> dict[str, d
         if s:
             stats[server.name] = s
         if s and not opts.quiet:
-            print(f"icrsumo: batched inference of {server.name} on {opts.batch_inference} "
+            print(f"icrsumo: batched inference of {visible(server.name)} on {opts.batch_inference} "
                   f"({s['processes']} process{'es' if s['processes'] > 1 else ''}): "
                   f"{s['acts']} actions in {s['batches']} forward passes (mean batch "
                   f"{s['acts'] / max(s['batches'], 1):.1f}, largest {s['largest_batch']})",

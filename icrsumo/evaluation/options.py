@@ -14,7 +14,7 @@ from ..fsio import check_out_dir
 from ..instructions.baseline_bank import load_baseline_bank
 from ..instructions.families import ALL_FAMILIES, FAMILIES
 from ..metrics import SCORINGS, scoring_names
-from ..resources import bundled_suites
+from ..routes import suite_file
 from ..traffic import TRAFFIC_LEVELS
 
 #: execution backends: a local process pool, or Ray
@@ -108,11 +108,7 @@ class EvalOptions:
                              f"use {', '.join(TRAFFIC_LEVELS)}")
         if self.baseline_bank is not None:
             load_baseline_bank(self.baseline_bank)  # an InputError for a bad file, before anything runs
-        p = Path(self.suite)
-        if self.suite not in bundled_suites() and not p.is_file() and not (p / "index.json").is_file():
-            raise InputError("--suite", self.suite, "unknown suite",
-                             f"use {', '.join(bundled_suites())}, a route XML file or a "
-                             "convert-routes folder")
+        suite_file(self.suite, "--suite", folders=True)  # a missing file named as one, not a suite
 
     def _check_types(self) -> None:
         def option(name: str) -> str:

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..convert import safe_name
-from ..errors import InputError
+from ..errors import InputError, visible
 from ..instructions.families import ALL_FAMILIES
 from ..scenario import find_scenarios, read_scenario
 from ..store import ResultStore
@@ -54,6 +54,7 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     write_attribution(summary, attribution, out)
     guards = guard_doc(summary, records)
     if guards is not None:
+        table += "\n" + guard_note(guards)
         if any(r["guard"] == "text" for r in guards["rows"].values()):
             from ..guards.text import TextGuard
             from ..instructions.banks import load_banks
@@ -68,6 +69,38 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     if not opts.quiet:
         print(table)
     return summary
+
+
+def guard_note(doc: dict) -> str:
+    """What the printed summary says of a run's guards (:func:`icrsumo.guards.measure.guard_doc`):
+    per guard the misleading instructions it blocked (detection) and the goal-preserving ones it
+    blocked (false blocks), per guarded row the failures it prevented and caused against the
+    unguarded agent, and where to read more."""
+    from ..guards.measure import PRESERVING
+    from ..vocab import Family
+
+    def share(blocked: int, checked: int) -> str:
+        return f"{blocked}/{checked}" + (f" ({100 * blocked / checked:.1f} %)" if checked else "")
+
+    lines = []
+    for guard in doc["guards"]:
+        rows = {n: r for n, r in doc["rows"].items() if r["guard"] == guard}
+        counts = {}
+        for fams in (PRESERVING, (Family.MISLEADING,)):
+            f = [r["families"][str(x)] for r in rows.values() for x in fams if str(x) in r["families"]]
+            counts[fams] = (sum(x["blocked"] for x in f), sum(x["checked"] for x in f))
+        lines.append(f"Guard {visible(guard)}: blocked {share(*counts[(Family.MISLEADING,)])} misleading "
+                     f"instructions (detection) and {share(*counts[PRESERVING])} baseline, paraphrase and "
+                     "noise ones (false blocks)")
+        for name, r in rows.items():
+            if not r["unguarded_in_run"]:
+                continue
+            prevented = sum(f["flips"]["prevented"] for f in r["families"].values())
+            caused = sum(f["flips"]["caused"] for f in r["families"].values())
+            lines.append(f"  {visible(name)}: {prevented} failures of the unguarded agent prevented, "
+                         f"{caused} caused")
+    lines.append("guard.md holds every guarded row's table; docs/guards.md says what the numbers mean")
+    return "\n".join(lines) + "\n"
 
 
 def store_digest(store: ResultStore, scoring: str) -> str | None:

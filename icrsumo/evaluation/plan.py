@@ -18,6 +18,7 @@ from ..instructions.baseline_bank import BaselineBank, load_baseline_bank
 from ..instructions.families import FAMILIES
 from ..instructions.generate import GenerateOptions, generate
 from ..resources import bundled_suites, suite_coords
+from ..routes import check_route_selection, route_ids, suite_file
 from ..scenario import find_scenarios, read_scenario
 from ..vocab import CONTROL_FAMILIES, variants_of
 from .options import EvalOptions
@@ -63,24 +64,60 @@ class PreparedSuite:
     skipped: tuple[str, ...] = ()
 
 
-def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None) -> dict:
+def folder_run(out: Path, old: Mapping) -> str:
+    """The command that made an out folder (``evaluate`` or ``attack``: its episodes and files
+    are that command's, so another command cannot resume or grow it), from its stored
+    configuration ``old`` (``run``); for a folder written before config.json named it: attack
+    where the attack's files are, else evaluate."""
+    run = old.get("run")
+    if isinstance(run, str):
+        return run
+    return "attack" if (out / "attack.json").is_file() or (out / "attack").is_dir() else "evaluate"
+
+
+def check_run(out: Path, old: Mapping, run: Mapping[str, object]) -> None:
+    """An InputError when the folder's stored configuration ``old`` was made by another command
+    than ``run["run"]``, or with other values of the settings ``run`` names (an attack's
+    ``constraint``; settings a folder written before they were recorded lacks are not
+    compared)."""
+    was, now = folder_run(out, old), run["run"]
+    if was != now:
+        raise InputError(out / "config.json", "run", f"the folder holds the results of an {was} run, "
+                         f"which an {now} run cannot resume or add to (their episodes and files differ)",
+                         f"give the {now} run another out folder")
+    diff = [k for k in run if k != "run" and k in old and old[k] != run[k]]
+    if diff:
+        shown = ", ".join(f"{k}={old[k]!r} (now {run[k]!r})" for k in diff)
+        raise InputError(out / "config.json", diff[0], f"the folder holds the results of an {was} run "
+                         f"with other settings: {shown}",
+                         f"use the same settings to resume it, or give this {now} run another out folder")
+
+
+def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None,
+                 run: Mapping[str, object] | None = None) -> dict:
     """The configuration stored in OUT/config.json; an InputError when OUT holds another one.
+    ``run``: the command making the folder and its own settings that must match (default
+    ``{"run": "evaluate"}``; an attack's: ``{"run": "attack", "constraint": ...}``), stored with
+    it: a folder of one command is refused to the other (:func:`check_run`).
     A larger ``--k`` than the folder's is the same configuration grown: ``k_grown_from`` lists
     the folder's earlier K, and the instructions keep every earlier variant (the new ones are
     drawn from the templates those did not use).
     With a ``--baseline-bank`` (``bank``: the file already loaded) the file's SHA-256 is part of
     it (its name is recorded too, but another path to the same bytes is the same
     configuration)."""
-    config = {"suite": opts.suite, "seed": opts.seed, "k": opts.k, "traffic": opts.traffic,
+    run = dict(run or {"run": "evaluate"})
+    config = {**run, "suite": opts.suite, "seed": opts.seed, "k": opts.k, "traffic": opts.traffic,
               "scoring": opts.scoring, "converter": CONVERTER_VERSION}
     if opts.baseline_bank is not None and bank is None:
         bank = load_baseline_bank(opts.baseline_bank)
-    compared = {**config, "baseline_bank_sha256": bank.sha256 if bank is not None else None}
+    compared = {k: v for k, v in config.items() if k not in run}
+    compared["baseline_bank_sha256"] = bank.sha256 if bank is not None else None
     path = out / "config.json"
     if path.is_file():
         old = read_json(path, "evaluation configuration", "restore it, or use another --out folder")
         if not isinstance(old, dict):
             raise InputError(path, "", "is not a JSON object", "restore it, or use another --out folder")
+        check_run(out, old, run)
         diff = [k for k in compared if old.get(k) != compared[k]]
         history = old.get("k_grown_from")
         grown = [x for x in history if isinstance(x, int)] if isinstance(history, list) else []
@@ -150,7 +187,20 @@ def _resolve_suite(opts: EvalOptions, out: Path) -> tuple[Path, list[str]]:
     return target, list(report.failures)
 
 
-def prepare_suite(opts: EvalOptions, agents: Mapping[str, dict] | None = None) -> PreparedSuite:
+def _check_selection(opts: EvalOptions) -> None:
+    """``routes`` and ``rollout_route`` checked against the suite's route file before anything
+    is converted: a mistyped id fails at once, not after the whole suite has been converted."""
+    path = suite_file(opts.suite, "--suite", folders=True)
+    if path is None or not (opts.routes or opts.rollout_route):
+        return
+    ids = route_ids(path)
+    check_route_selection(opts.routes or (), ids, "--routes", opts.suite)
+    if opts.rollout_route is not None:
+        check_route_selection([opts.rollout_route], opts.routes or ids, "--rollout-route", opts.suite)
+
+
+def prepare_suite(opts: EvalOptions, agents: Mapping[str, dict] | None = None,
+                  run: Mapping[str, object] | None = None) -> PreparedSuite:
     """Check the out folder's configuration, convert the suite into OUT/scenarios (a
     convert-routes folder is used as it is), generate the instructions of every family into
     OUT/instructions (both reused when present), check ``--routes`` and ``--rollout-route``
@@ -161,9 +211,10 @@ def prepare_suite(opts: EvalOptions, agents: Mapping[str, dict] | None = None) -
     leaves nothing behind (and never a config.json that locks the folder)."""
     out = Path(opts.out)
     bank = load_baseline_bank(opts.baseline_bank) if opts.baseline_bank is not None else None
-    config = check_config(out, opts, bank)
+    config = check_config(out, opts, bank, run)
     if agents:
         config["agents"] = {**config.get("agents", {}), **agents}
+    _check_selection(opts)
     before = OutFolder.before(out)
     try:
         scenarios, skipped = _resolve_suite(opts, out)

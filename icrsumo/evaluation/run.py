@@ -17,7 +17,7 @@ from ..agents.registry import (
     agent_name,
     python_agent,
 )
-from ..errors import InputError
+from ..errors import InputError, display_url, short, visible
 from ..fsio import FolderLock
 from ..guards.base import guarded_fingerprint, guarded_name
 from ..instructions.families import ALL_FAMILIES, FAMILIES
@@ -38,6 +38,8 @@ MAX_ATTEMPTS = 2
 RETRIED = frozenset({ErrorKind.ERROR, ErrorKind.WORKER_DIED})
 #: longest stored message of a crashed episode (characters)
 MAX_MESSAGE = 2000
+#: longest agent or guard name (characters; a route id may have 200 too)
+MAX_NAME = 200
 
 
 @dataclass(frozen=True)
@@ -150,10 +152,11 @@ class AgentIds:
             target, sep, cls = spec.rpartition(":")
             if sep and target.endswith(".py") and not spec.startswith("remote:"):
                 shown = f"{Path(target).resolve()}:{cls}"
+            shown = display_url(shown)   # a password in a remote: or llm: URL is never stored
             out[name] = {"fingerprint": self.fingerprints[name], "spec": shown}
             for guard, gname in self.guard_names.items():
                 row = guarded_name(name, gname)
-                out[row] = {"fingerprint": self.fingerprints[row], "spec": shown, "guard": guard}
+                out[row] = {"fingerprint": self.fingerprints[row], "spec": shown, "guard": display_url(guard)}
         return out
 
 
@@ -169,7 +172,7 @@ def identify_agents(factories: Mapping[str, Callable], replacing: tuple[str, ...
     fps: dict[str, str] = {}
     first: dict[str, str] = {}
     for spec, factory in factories.items():
-        name = names[spec] = agent_name(spec, factory)
+        name = names[spec] = check_name(agent_name(spec, factory), "agent", spec)
         fp = fingerprint(factory)
         if name in fps and fps[name] != fp:
             raise InputError("--agent", spec, f"is named {name!r}, as {first[name]} is, but is another agent "
@@ -180,7 +183,7 @@ def identify_agents(factories: Mapping[str, Callable], replacing: tuple[str, ...
         first.setdefault(name, spec)
     gnames: dict[str, str] = {}
     for gspec, gfactory in (guards or {}).items():
-        gname = gnames[gspec] = guard_name(gspec, gfactory)
+        gname = gnames[gspec] = check_name(guard_name(gspec, gfactory), "guard", gspec)
         other = next((s for s, n in gnames.items() if n == gname and s != gspec), None)
         if other is not None:
             raise InputError("--guard", gspec, f"is named {gname!r}, as {other} is",
@@ -195,6 +198,17 @@ def identify_agents(factories: Mapping[str, Callable], replacing: tuple[str, ...
     return AgentIds(names, fps, tuple(first.values()), gnames)
 
 
+def check_name(name: str, kind: str, spec: str) -> str:
+    """``name`` (of an agent or guard, ``kind``, given as ``spec``) when it has at most
+    :data:`MAX_NAME` characters: it names the rows, tables and files of its results; an
+    InputError before any episode runs otherwise."""
+    if len(name) > MAX_NAME:
+        raise InputError(kind, short(spec, 60), f"its name {short(name)} is {len(name)} characters long "
+                         f"(at most {MAX_NAME})", f"give the {kind} a shorter name (the class's name "
+                         f"attribute; a {kind} without one is named by its spec)")
+    return name
+
+
 def check_agents(store_path: Path, ids: AgentIds, replacing: tuple[str, ...]) -> None:
     """An InputError when the store at ``store_path`` (if any) holds episodes of another agent
     under one of ``ids``' names (see :meth:`ResultStore.check_agents`); nothing is written."""
@@ -206,10 +220,20 @@ def check_agents(store_path: Path, ids: AgentIds, replacing: tuple[str, ...]) ->
 
 def claim_agents(store: ResultStore, ids: AgentIds, replacing: tuple[str, ...]) -> None:
     """Claim the run's agents in ``store`` (replacing those in ``replacing``) and say on stderr
-    which agents' stored episodes predate fingerprints (they are taken as the agent's)."""
+    what each replacement deleted (how many stored episodes, of which fingerprint) and which
+    agents' stored episodes predate fingerprints (they are taken as the agent's)."""
+    from ..agents.identity import short as short_fp
+
+    doomed = store.replaceable(ids.fingerprints, replacing)
     for name in store.claim_agents(ids.fingerprints, replacing):
-        print(f"icrsumo: note: the stored episodes of {name} were stored before icrsumo kept agent "
-              f"fingerprints; they are taken as this agent's (--replace-agent {name} runs them again)",
+        print(f"icrsumo: note: the stored episodes of {visible(name)} were stored before icrsumo kept agent "
+              f"fingerprints; they are taken as this agent's (--replace-agent {visible(name)} runs them "
+              "again)", file=sys.stderr)
+    for name, (n, fps) in doomed.items():
+        old = ", ".join(short_fp(fp) if fp else "none (stored before fingerprints)" for fp in fps)
+        what = (f"deleted {n} stored episode{'s' * (n != 1)} of the agent of fingerprint {old}" if n else
+                "no stored episodes of another agent to delete (replaced already)")
+        print(f"icrsumo: replacing {visible(name)} (now {short_fp(ids.fingerprints[name])}): {what}",
               file=sys.stderr)
 
 
@@ -241,7 +265,7 @@ def _run_locked(opts: EvalOptions, factories: dict[str, Callable], guards: dict[
         claim_agents(store, ids, opts.replace_agents)
         check_stored_routes(opts, store, set(names.values()), written, prep.skipped)
         for line in prep.skipped:
-            print(f"icrsumo: skipped: {line}", file=sys.stderr)
+            print(f"icrsumo: skipped: {visible(line)}", file=sys.stderr)
         if not written:
             raise no_routes(opts)
         have = store.keys(EpisodeStatus.DONE if opts.retry_crashed else None)
@@ -319,14 +343,24 @@ def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> d
     """Rebuild summary, tables and figures of an evaluation folder from its store (no SUMO);
     returns the summary. With ``scoring`` (a name of :data:`icrsumo.metrics.SCORINGS`) every
     finished episode is rescored from its stored log by those rules (the store is left as it
-    is; the summary names the scoring); without, the stored scores are reported."""
+    is; the summary names the scoring); without, the stored scores are reported.
+    The report owns the folder while it writes (:class:`icrsumo.fsio.FolderLock`): a run still
+    storing episodes there is an InputError, never a summary of half its episodes. The store is
+    only read."""
     out = Path(out)
+    read_config(out)  # an InputError for a folder that is no evaluation's, before the lock
+    if scoring is not None and scoring not in SCORINGS:
+        raise InputError("--scoring", scoring, "unknown scoring", f"use {', '.join(scoring_names())}")
+    with FolderLock(out, busy_fix="wait for it to end (an evaluation writes its reports when it ends), "
+                    "then report again"):
+        return _report_locked(out, quiet, scoring)
+
+
+def _report_locked(out: Path, quiet: bool, scoring: str | None) -> dict:
     cfg_path = out / "config.json"
     cfg = read_config(out)
     stored_scoring = cfg.get("scoring")
-    if scoring is not None and scoring not in SCORINGS:
-        raise InputError("--scoring", scoring, "unknown scoring", f"use {', '.join(scoring_names())}")
-    with ResultStore(out / "results.sqlite") as store:
+    with ResultStore(out / "results.sqlite", readonly=True) as store:
         records = store.records()
         inexact = 0
         if scoring is not None:

@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
+from ..agents.base import AgentTimeout
 from ..types import Intent, Maneuver
 from ..vocab import Verdict
 
@@ -46,6 +47,12 @@ def guarded_fingerprint(agent_fp: str, guard_fp: str) -> str:
 
 class GuardError(RuntimeError):
     """A guard answered something other than pass / block (the episode crashes with it)."""
+
+
+class GuardTimeout(AgentTimeout):
+    """A guard's ``reset`` or ``check`` did not answer within the agent calls' time limit
+    (``agent_timeout``): the episode is stored as crashed with "guard NAME did not answer
+    within N s", at once (as for a hung agent: no retry)."""
 
 
 @dataclass(frozen=True)

@@ -15,12 +15,10 @@ stops answering crashes the episode with the reason, as for the LLM agent.
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from ..agents.llm import Asker, LLMSettings, api_key, check_server, parse_spec, with_format
-from ..llmio import ResponseCache
+from ..agents.llm import Asker, LLMSettings, api_key, bound, check_server, parse_spec, with_format
 from ..vocab import Verdict
 from .base import GuardContext, GuardInfo
 
@@ -118,9 +116,8 @@ class LLMGuardFactory:
                                   sort_keys=True))
 
     def bind(self, out: Path) -> LLMGuardFactory:
-        cache_dir = Path(out) / "llm-cache"
-        offline = check_server(self.settings, len(ResponseCache(cache_dir)) > 0, "--guard")
-        return LLMGuardFactory(replace(self.settings, cache_dir=cache_dir, offline=offline))
+        """A factory whose guards keep their answers in ``out/llm-cache`` (:func:`bound`)."""
+        return LLMGuardFactory(bound(self.settings, out, "--guard"))
 
     def __call__(self) -> LLMGuard:
         if not self._checked:

@@ -35,7 +35,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from ..errors import InputError
-from ..fsio import no_constants, no_duplicates
+from ..fsio import check_surrogates, no_constants, no_duplicates
 from ..types import Intent
 from .banks import BASELINE_TYPES, ORDINALS
 from .intent import classify_intent
@@ -253,6 +253,7 @@ def _parse(path: Path, text: str) -> dict:
         raise _fail(path, "", f"malformed JSON ({err})", "fix the JSON") from None
     except RecursionError:
         raise _fail(path, "", "malformed JSON (nested too deeply)", "fix the JSON") from None
+    check_surrogates(data, text, path, "the baseline bank")
     if not isinstance(data, dict):
         raise _fail(path, "top level", f"must be a JSON object, not {type(data).__name__}",
                     'map LangAuto instruction-type ids "0" .. "64" to lists of phrasings')

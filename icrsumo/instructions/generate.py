@@ -12,7 +12,6 @@ its SHA-256 recorded in every route file and in ``index.json``.
 
 from __future__ import annotations
 
-import multiprocessing
 import zlib
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
@@ -25,6 +24,7 @@ from ..convert import safe_name
 from ..errors import InputError, check_seed
 from ..fsio import check_out_dir, dumps_json, write_atomic
 from ..networks import load_net
+from ..procs import spawn_context
 from ..scenario import Scenario, check_against_net, find_scenarios, read_scenario
 from ..types import InstructionSet, Maneuver
 from ..vocab import CONTROL_FAMILIES
@@ -187,7 +187,7 @@ def generate(scenarios: Path, out: Path, opts: GenerateOptions,
     if opts.workers > 1 and len(jobs) > 1:
         # spawned, not forked (see icrsumo.convert.convert_routes)
         with ProcessPoolExecutor(max_workers=min(opts.workers, len(jobs)),
-                                 mp_context=multiprocessing.get_context("spawn")) as pool:
+                                 mp_context=spawn_context()) as pool:
             results = list(pool.map(_job, jobs))
     else:
         results = [_job(j) for j in jobs]

@@ -3,9 +3,10 @@
 One chat-completions request per (route, family) to any OpenAI-compatible server (vLLM,
 llama.cpp server, a hosted API) asks for ``k`` rewrites of the route's whole baseline
 instruction sequence as JSON. The answer is validated strictly (ids, triggers, placeholders,
-intent of every text), an invalid answer or a transport failure is retried with the problem
-fed back to the model, and a valid answer is cached under the SHA-256 of the first request
-body, so a rerun is exact and needs no network. The key covers model, messages (family, K,
+intent of every text), an invalid answer is retried with the problem fed back to the model (a
+transport failure or a server fault, such as an HTML page, is retried as it was), and a valid
+answer is cached under the SHA-256 of the first request body, so a rerun is exact and needs no
+network. The key covers model, messages (family, K,
 the baseline texts), seed and temperature; not the endpoint or the API key, so the same model
 served elsewhere shares the cache.
 
@@ -22,9 +23,12 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from ..errors import display_url
 from ..llmio import (
     Invalid,
+    Reply,
     ResponseCache,
+    ServerFault,
     Transport,
     answer_text,
     canonical,
@@ -49,9 +53,11 @@ _UNCHECKED = (Intent.STOP, Intent.UNKNOWN)   # baseline intents without an inten
 @dataclass(frozen=True)
 class LLMConfig:
     """Where and how to ask. ``endpoint`` is the API base URL (``http://127.0.0.1:8000/v1``);
-    requests go to ``{endpoint}/chat/completions``. ``timeout`` (s) bounds each request,
+    requests go to ``{endpoint}/chat/completions``. ``timeout`` (s): the deadline of each whole
+    request (connect, headers and body),
     ``retries`` is the number of extra attempts after an invalid or failed answer.
-    ``api_key``, when given, is sent as ``Authorization: Bearer``; it is never cached."""
+    ``api_key``, when given, is sent as ``Authorization: Bearer`` to the endpoint's own origin
+    only; it is never cached, and redacted from what the server sends back."""
 
     endpoint: str
     model: str
@@ -169,9 +175,10 @@ _Invalid = Invalid
 _FENCE = re.compile(r"```[ \t]*(?:json|JSON)?[ \t]*\r?\n?(.*?)```", re.DOTALL)
 
 
-def _content(raw: bytes) -> str:
-    """``choices[0].message.content`` of a chat-completions response body."""
-    content, reason = answer_text(raw)
+def _content(reply: Reply) -> str:
+    """``choices[0].message.content`` of a chat-completions response (:class:`ServerFault`
+    when it is none)."""
+    content, reason = answer_text(reply)
     if reason == "length":
         # Still parsed below; a truncated answer normally fails there with this hint.
         try:
@@ -184,6 +191,8 @@ def _content(raw: bytes) -> str:
 def _parse_content(content: str) -> dict:
     """The JSON object in ``content``, bare or inside a ```json fence."""
     text = content.strip()
+    if not text:
+        raise _Invalid(["answer content is empty"])
     try:
         obj = json.loads(text)
     except ValueError as err:
@@ -355,8 +364,9 @@ def llm_variants(baseline: InstructionSet, family: str, k: int, seed: int, cfg: 
             pass   # e.g. the classifier changed since: ask again and overwrite
 
     url = chat_url(cfg.endpoint)
+    shown = display_url(cfg.endpoint)
     if not is_http(url):
-        raise LLMError(f"route {rid}, family {family}: LLM endpoint {cfg.endpoint!r} is not an "
+        raise LLMError(f"route {rid}, family {family}: LLM endpoint {display_url(cfg.endpoint)!r} is not an "
                        "http:// or https:// URL", rid, family, "bad endpoint")
     attempts = 1 + max(0, int(cfg.retries))
     body = first
@@ -365,23 +375,26 @@ def llm_variants(baseline: InstructionSet, family: str, k: int, seed: int, cfg: 
         if attempt and RETRY_BACKOFF > 0 and problem.startswith("transport:"):
             time.sleep(min(RETRY_BACKOFF * attempt, 5.0))
         try:
-            status, raw = exchange(url, canonical(body), api_key=cfg.api_key, timeout=cfg.timeout)
+            reply = exchange(url, canonical(body), api_key=cfg.api_key, timeout=cfg.timeout)
         except Transport as err:
             if attempt == 0 and err.unreachable:
-                raise LLMError(f"route {rid}, family {family}: LLM endpoint {cfg.endpoint} unreachable "
+                raise LLMError(f"route {rid}, family {family}: LLM endpoint {shown} unreachable "
                                f"({err})", rid, family, str(err)) from None
             problem = f"transport: {err}"
             continue
-        if status != 200:
-            problem = f"transport: {http_problem(status, raw)}"
-            if 400 <= status < 500 and status not in (408, 409, 429):
-                raise LLMError(f"route {rid}, family {family}: LLM endpoint {url} answered "
+        if reply.status != 200:
+            problem = f"transport: {http_problem(reply)}"
+            if 400 <= reply.status < 500 and reply.status not in (408, 409, 429):
+                raise LLMError(f"route {rid}, family {family}: LLM endpoint {display_url(url)} answered "
                                f"{problem.removeprefix('transport: ')} (check endpoint, model and API key)",
                                rid, family, problem)
             continue
         try:
-            content = _content(raw)
+            content = _content(reply)
             texts = validate_answer(content, baseline, family, k, classify)
+        except ServerFault as err:
+            problem = f"transport: {err}"
+            continue
         except _Invalid as err:
             problem = err.summary
             body = _with_problem(first, problem)
@@ -389,5 +402,5 @@ def llm_variants(baseline: InstructionSet, family: str, k: int, seed: int, cfg: 
         _cache_store(cfg.cache_dir, key, first, content, attempt + 1)
         return _variant_sets(baseline, family, seed, cfg, key, texts)
     last = problem.removeprefix("transport: ")
-    raise LLMError(f"route {rid}, family {family}: no valid LLM answer from {url} after {attempts} "
-                   f"attempt(s); last problem: {last}", rid, family, last)
+    raise LLMError(f"route {rid}, family {family}: no valid LLM answer from {display_url(url)} after "
+                   f"{attempts} attempt(s); last problem: {last}", rid, family, last)

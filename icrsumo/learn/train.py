@@ -3,11 +3,13 @@
 Config: a TOML file of :class:`TrainConfig` keys (unknown keys are refused). Seeded: the
 initial weights, the validation split (by route), the batch order and the instruction
 augmentation all follow ``seed`` through ``numpy.random.Generator`` objects (and a forked torch
-RNG for the initial weights). Every ``eval_every`` steps one JSON line with the mean training
-losses since the last line and the validation metrics goes to ``OUT/train_log.jsonl`` (and to
-stderr); every ``checkpoint_every`` steps the whole state goes to ``OUT/last.pt``, from which a
-rerun with the same config resumes. At the end the inference checkpoint ``OUT/model.pt`` is
-exported (float32, loaded with ``torch.load(..., weights_only=True)``).
+RNG for the initial weights). Progress goes to stderr (unless ``quiet``): a line per stage
+before training, then a bar of the steps with the mean training loss. Every ``eval_every``
+steps one JSON line with the mean training losses since the last line and the validation
+metrics goes to ``OUT/train_log.jsonl`` (and to stderr); every ``checkpoint_every`` steps the
+whole state goes to ``OUT/last.pt``, from which a rerun with the same config resumes. At the
+end the inference checkpoint ``OUT/model.pt`` is exported (float32, loaded with
+``torch.load(..., weights_only=True)``).
 
 Runs on CPU (slowly) or on a GPU (``device = "auto"`` picks CUDA when present); the whole
 dataset (bit-packed rasters) is moved to the device once, so a GPU is never starved.
@@ -22,6 +24,7 @@ touched, so a refused run writes nothing.
 from __future__ import annotations
 
 import difflib
+import functools
 import json
 import math
 import re
@@ -36,6 +39,7 @@ import numpy as np
 
 from ..errors import InputError, expect
 from ..fsio import dumps_json, read_json_doc, read_text, write_atomic
+from ..procs import spawn_context
 from .augment import augment
 from .text import ENCODERS, VECTOR_ENCODERS, build_vocab
 
@@ -329,11 +333,10 @@ def encode_texts(enc, texts: list[str], workers: int = 1) -> np.ndarray:
     per-text cost dominates); the same arrays whatever the worker count."""
     if workers <= 1 or enc.kind not in VECTOR_ENCODERS or len(texts) < 1000:
         return enc.encode_many(texts)
-    import multiprocessing as mp
 
     size = -(-len(texts) // (workers * 4))
     chunks = [(enc, texts[i:i + size]) for i in range(0, len(texts), size)]
-    with mp.get_context("spawn").Pool(workers) as pool:
+    with spawn_context().Pool(workers) as pool:
         return np.concatenate(pool.map(_encode_chunk, chunks))
 
 
@@ -344,6 +347,26 @@ def _intent_ids(ds: Dataset) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- loop
+def _say(text: str, quiet: bool) -> None:
+    """One line of progress on stderr (none when ``quiet``)."""
+    if not quiet:
+        print(f"icrsumo train: {text}", file=sys.stderr, flush=True)
+
+
+def step_bar(steps: int, done: int, quiet: bool):
+    """The progress of training on stderr (a tqdm bar: steps done of ``steps``, steps per
+    second, time left, the mean training loss since the last validation line); None when
+    ``quiet``. On a terminal a live bar; otherwise (a log file) a line at most every 30 s."""
+    if quiet:
+        return None
+    from tqdm import tqdm
+
+    tty = bool(getattr(sys.stderr, "isatty", lambda: False)())
+    return tqdm(total=steps, initial=done, desc="icrsumo train", unit="step", file=sys.stderr,
+                dynamic_ncols=tty, ascii=not tty, leave=True, smoothing=0.1, miniters=1,
+                mininterval=0.1 if tty else 30.0)
+
+
 def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = False,
           encode_workers: int = 1) -> dict:
     """Train (or resume) into ``out``; returns the final validation metrics. ``encode_workers``:
@@ -372,7 +395,8 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
                              "use another --out folder, or the same config")
     rng = np.random.default_rng([cfg.seed, 1])
     t0 = time.perf_counter()
-    ds = load_dataset(data)
+    say = functools.partial(_say, quiet=quiet)
+    ds = load_dataset(data)  # (progress only once the data is known good: a refusal is one line)
     tr_idx, va_idx = split(ds, cfg.val_fraction, cfg.seed)
     if not len(tr_idx):
         folders = data if isinstance(data, list) else [data]
@@ -390,6 +414,8 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
     n_texts = np.array([len(p) for p in pool])
     distinct = list(dict.fromkeys(t for texts in pool for t in texts))  # each text encoded once
     row = {t: i for i, t in enumerate(distinct)}
+    say(f"read {len(ds.routes)} routes; encoding {len(distinct)} instruction texts "
+        f"({cfg.encoder} encoder) ...")
     codes = encode_texts(enc, distinct, encode_workers)
     for i, texts in enumerate(pool):
         ids[i, : len(texts)] = codes[[row[t] for t in texts]]
@@ -437,13 +463,12 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
     val_idx = (np.sort(val_rng.choice(va_idx, size=min(len(va_idx), 4096), replace=False))
                if len(va_idx) else va_idx)
     val_var = val_rng.integers(0, 1 << 30, size=len(val_idx))
-    if not quiet:
-        print(f"icrsumo train: {len(tr_idx)} training / {len(va_idx)} validation frames, {len(ds.docs)} "
-              f"instructions, {nets.parameter_count(trainer.model)} parameters on {device}, "
-              f"from step {trainer.step}", file=sys.stderr)
+    say(f"{len(tr_idx)} training / {len(va_idx)} validation frames, {len(ds.docs)} instructions, "
+        f"{nets.parameter_count(trainer.model)} parameters on {device}, from step {trainer.step}")
     sums: dict[str, float] = {}
     n_sum = 0
     metrics: dict = {}
+    bar = step_bar(cfg.steps, trainer.step, quiet)
     while trainer.step < cfg.steps:
         idx = tr_idx[rng.integers(0, len(tr_idx), size=cfg.batch)]
         var = rng.integers(0, 1 << 30, size=cfg.batch)
@@ -451,6 +476,9 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
             sums[k] = sums.get(k, 0.0) + v
         n_sum += 1
         step = trainer.step
+        if bar is not None:
+            bar.set_postfix_str(f"loss {sums.get('total', 0.0) / n_sum:.4f}", refresh=False)
+            bar.update(1)
         if step % cfg.eval_every == 0 or step == cfg.steps:
             metrics = {"step": step, "lr": trainer.sched.get_last_lr()[0],
                        "train": {k: round(v / n_sum, 5) for k, v in sums.items()},
@@ -465,11 +493,13 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
                 metrics["val"] = {k: round(v, 5) for k, v in res.items()}
             with open(log_path, "a", encoding="utf-8") as f:
                 f.write(json.dumps(metrics) + "\n")
-            if not quiet:
-                print(f"icrsumo train: {json.dumps(metrics)}", file=sys.stderr)
+            if bar is not None:
+                bar.write(f"icrsumo train: {json.dumps(metrics)}", file=sys.stderr)
             sums, n_sum = {}, 0
         if step % cfg.checkpoint_every == 0 or step == cfg.steps:
             nets.save(trainer.state({"train_config": cfg_doc, "rng": rng.bit_generator.state}), last)
+    if bar is not None:
+        bar.close()
     folders = data if isinstance(data, list) else [data]
     meta = {"data": [Path(d).name for d in folders], "frames": int(len(tr_idx)), "steps": trainer.step,
             "seed": cfg.seed, "augment_instructions": cfg.augment_instructions, "final": metrics}

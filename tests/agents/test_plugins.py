@@ -106,3 +106,22 @@ def test_an_installed_plugin_agent_is_evaluated_by_name(site, tmp_path):
     assert run.returncode == 0, run.stderr
     assert "2 episodes done, 0 crashed" in run.stderr
     assert "plugin-cruise" in (out / "results.md").read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("group, option", [("icrsumo.agents", "--agent"), ("icrsumo.guards", "--guard")])
+def test_a_plugin_whose_import_exits_is_one_line_naming_it(tmp_path, group, option):
+    """A plugin module that calls ``sys.exit(0)`` when imported is refused in one line naming
+    the entry and the distribution (exit status 2), before anything runs: never a run that ends
+    with status 0 having run nothing."""
+    (tmp_path / "exiting_plugin.py").write_text("import sys\nsys.exit(0)\n")
+    dist = tmp_path / "exiting_plugin-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: exiting-plugin\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text(f"[{group}]\nexiting = exiting_plugin:Thing\n")
+    out = tmp_path / "out"
+    run = _python(tmp_path, ["icrsumo", "evaluate", option, "exiting", "--routes", "tiny_003", "--k", "1",
+                             "--quiet", "--out", str(out)], module=True)
+    lines = run.stderr.strip().splitlines()
+    assert run.returncode == 2 and len(lines) == 1 and "Traceback" not in run.stderr, run.stderr
+    assert f"{option}: exiting: cannot load exiting_plugin:Thing (plugin of exiting-plugin)" in lines[0]
+    assert "its import called sys.exit(0)" in lines[0] and not out.exists()

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import threading
 import time
+from contextlib import contextmanager
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import numpy as np
@@ -238,3 +239,96 @@ def test_serving_beyond_the_loopback_without_a_key_says_so(monkeypatch, capsys):
         assert "no authentication" not in capsys.readouterr().err
     finally:
         unregister("cruise-key")
+
+
+class _Echo(BaseHTTPRequestHandler):
+    """A server that keeps the Authorization header of every request (``said``), answers
+    ``/info``, ``/reset`` and ``/close`` and refuses ``/act`` quoting that header; ``moved``: a
+    URL it redirects every request to instead; ``trickle``: s between the bytes of an answer."""
+
+    protocol_version = "HTTP/1.1"
+    said: list[str] = []
+    moved = ""
+    trickle = 0.0
+
+    def log_message(self, *args):
+        pass
+
+    def _answer(self, status: int, doc: dict) -> None:
+        type(self).said.append(self.headers.get("Authorization", ""))
+        body = json.dumps({"protocol": PROTOCOL, **doc}).encode()
+        self.send_response(302 if self.moved else status)
+        self.send_header("Content-Length", str(len(body)))
+        if self.moved:
+            self.send_header("Location", self.moved + self.path)
+        self.end_headers()
+        try:
+            for i in range(len(body)):
+                self.wfile.write(body[i:i + 1])
+                self.wfile.flush()
+                time.sleep(self.trickle)
+        except (BrokenPipeError, ConnectionResetError):
+            pass
+
+    def do_GET(self):  # noqa: N802
+        self._answer(200, {"name": "echo"})
+
+    def do_POST(self):  # noqa: N802
+        self.rfile.read(int(self.headers["Content-Length"]))
+        if self.path == "/act":
+            self._answer(401, {"error": f"bad credentials {self.headers.get('Authorization')}"})
+        else:
+            self._answer(200, {})
+
+
+@contextmanager
+def _echo(**attrs):
+    handler = type("E", (_Echo,), {"said": [], **attrs})
+    httpd = ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    try:
+        yield httpd.server_address[1], handler
+    finally:
+        httpd.shutdown()
+        httpd.server_close()
+
+
+def test_a_password_in_the_url_goes_as_basic_auth_and_is_redacted_everywhere():
+    import base64
+
+    from icrsumo.agents.remote import RemoteFactory
+
+    with _echo() as (port, handler):
+        url = f"http://alice:pa%40ss-word-42@127.0.0.1:{port}"
+        factory = RemoteFactory(url)
+        token = base64.b64encode(b"alice:pa@ss-word-42").decode()
+        assert handler.said == [f"Basic {token}"]
+        assert factory.fingerprint == f"remote echo at http://alice:***@127.0.0.1:{port}"
+        agent = factory()
+        agent.reset(INFO)
+        with pytest.raises(AgentError) as err:
+            agent.act(_obs())
+        agent.close()
+    line = str(err.value)
+    assert line == f"remote agent at http://alice:***@127.0.0.1:{port}: bad credentials Basic ***"
+    assert all(secret not in line for secret in ("pa%40ss", "pa@ss", token))
+
+
+def test_a_redirect_is_not_followed_so_the_key_stays_with_its_server(monkeypatch):
+    from icrsumo.agents.remote import RemoteFactory
+    from icrsumo.errors import InputError
+
+    monkeypatch.setenv("ICR_TEST_KEY", "s3cret-key-77")
+    with _echo() as (other, elsewhere), _echo(moved=f"http://127.0.0.1:{other}") as (port, handler):
+        with pytest.raises(InputError, match="answered HTTP 302, a redirect, which is not followed"):
+            RemoteFactory(f"http://127.0.0.1:{port}?key_env=ICR_TEST_KEY")
+        assert handler.said == ["Bearer s3cret-key-77"] and elsewhere.said == []
+
+
+def test_the_timeout_is_a_deadline_for_the_whole_request():
+    """An answer trickled a byte every 0.05 s (about 2 s in all) is cut off after 0.3 s."""
+    with _echo(trickle=0.05) as (port, _):
+        agent = RemoteAgent(f"http://127.0.0.1:{port}", "echo", timeout=0.3)
+        with pytest.raises(AgentTimeout, match="agent did not answer within 0.3 s"):
+            agent.reset(INFO)
+        agent.close()

@@ -26,7 +26,10 @@ def test_a_larger_k_adds_the_missing_variants(tmp_path, capsys):
     before = _sets(out)
     assert "3 episodes done" in capsys.readouterr().err
     assert main([*RUN, "--k", "3", "--out", str(out)]) == 0
-    assert "7 episodes done" in capsys.readouterr().err  # 4 new variants ran beside the 3 stored
+    err = capsys.readouterr().err.strip().splitlines()
+    # the run says what it ran now (4 new variants) beside what was stored; the digest stays last
+    assert err[-2].startswith("4 episodes run now, 3 already stored; 7 episodes done, 0 crashed")
+    assert err[-1].startswith("digest: sha256:")
     after = _sets(out)
     assert all(after[key] == before[key] for key in before)  # every earlier sequence kept as it was
     for fam in ("misleading", "noise"):

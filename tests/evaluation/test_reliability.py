@@ -322,7 +322,7 @@ def test_a_name_property_on_the_class_is_no_name():
      "--timeout: nan: must be a positive number of seconds"),
     (["check-agent", "route-oracle", "--decisions", "0"], "--decisions: 0: must be at least 1"),
     (["convert-routes", "no-such-suite", "--out", "unused"],
-     "no-such-suite: no such route file or bundled suite"),
+     "routes: no-such-suite: unknown suite (fix: use a bundled suite"),
 ])
 def test_each_bad_value_is_named(capsys, argv, expect):
     assert expect in _one_line_error(capsys, argv)

@@ -367,13 +367,19 @@ BAD = {   # case -> (step factory, problem text expected in the feedback / error
     "unchanged_paraphrase": (lambda: para(0, 2, "text", BASELINE.instructions[2].text),
                              "repeats the original wording"),
     "http_500": (lambda: raw(500, OOM), "HTTP 500: CUDA out of memory"),
-    "http_200_not_json": (lambda: raw(200, b"<html>oops</html>"), "response body is not JSON"),
-    "no_choices": (lambda: raw(200, b'{"choices": []}'), "no choices[0]"),
+    "http_200_not_json": (lambda: raw(200, b"<html>oops</html>"),
+                          "not an OpenAI-compatible JSON answer (the body is not JSON)"),
+    "no_choices": (lambda: raw(200, b'{"choices": []}'),
+                   "not an OpenAI-compatible JSON answer (no choices[0])"),
     "null_content": (lambda: raw(200, b'{"choices": [{"message": {"content": null}}]}'),
-                     "no choices[0].message.content"),
+                     "answer content is empty"),
     "truncated": (lambda: lambda body: (200, chat(variants_json(body, "paraphrase")[:40], "length"), 0.0),
                   "truncated (finish_reason=length)"),
 }
+
+
+#: answers that are no OpenAI-compatible answer at all: never the model's, never fed back to it
+SERVER_FAULTS = ("http_500", "http_200_not_json", "no_choices")
 
 
 @pytest.mark.parametrize("case", sorted(BAD))
@@ -384,7 +390,7 @@ def test_invalid_answer_is_retried_then_valid_used(server, tmp_path, case):
     assert server.count == 2
     assert [i.text for i in out[0].instructions] == GOOD["paraphrase"]
     retry_user = server.requests[1]["messages"][-1]["content"]
-    if case == "http_500":          # a transport failure resends the same request
+    if case in SERVER_FAULTS:        # a transport failure or a server fault resends the same request
         assert server.requests[1] == server.requests[0]
     else:                            # the problem is fed back to the model
         assert "previous answer was rejected" in retry_user and problem in retry_user
@@ -400,7 +406,7 @@ def test_invalid_answer_is_retried_then_valid_used(server, tmp_path, case):
 
 @pytest.mark.parametrize("case", ["malformed_json", "wrong_variant_count", "changed_trigger",
                                   "changed_id_order", "dropped_placeholder", "intent_flip", "empty_text",
-                                  "http_500"])
+                                  "http_500", "http_200_not_json"])
 def test_retries_exhausted_raise(server, tmp_path, case):
     bad, problem = BAD[case]
     server.queue(bad(), bad(), bad(), ok("paraphrase"))
@@ -522,6 +528,16 @@ def test_client_error_is_not_retried(server, tmp_path):
     with pytest.raises(LLMError, match="HTTP 401: invalid api key"):
         run(server, tmp_path, k=1)
     assert server.count == 1
+
+
+def test_a_server_quoting_the_key_has_it_redacted(server, tmp_path):
+    key = "sk-test-0123456789abcdef"
+    quoted = json.dumps({"error": {"message": f"invalid api key Bearer {key}"}}).encode()
+    server.queue(raw(401, quoted))
+    with pytest.raises(LLMError) as err:
+        run(server, tmp_path, k=1, api_key=key)
+    assert "HTTP 401: invalid api key Bearer ***" in str(err.value) and key not in str(err.value)
+    assert key not in err.value.problem
 
 
 def test_rate_limit_is_retried(server, tmp_path):

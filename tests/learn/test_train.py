@@ -1,6 +1,7 @@
 """Training on CPU: a few steps lower the loss; the CLI trains, exports and resumes."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -55,6 +56,10 @@ def test_cli_trains_exports_and_resumes(tiny_data, tmp_path, capsys):
                    'val_fraction = 0.3\nwidth = 8\nhidden = 32\ndevice = "cpu"\n')
     out = tmp_path / "run"
     assert main(["train", str(cfg), "--data", str(tiny_data), "--out", str(out), "--steps", "4"]) == 0
+    err = capsys.readouterr().err  # progress on stderr: each stage, the steps with the loss, validation
+    assert "icrsumo train: read " in err and "instruction texts (token encoder)" in err
+    assert re.search(r"icrsumo train: +100%.*4/4 .*loss \d+\.\d{4}", err), err
+    assert err.count('"val"') == 2
     log = [json.loads(x) for x in (out / "train_log.jsonl").read_text().splitlines()]
     assert [x["step"] for x in log] == [2, 4] and "val" in log[-1]
     ck = torch.load(out / "model.pt", weights_only=True)
@@ -62,7 +67,9 @@ def test_cli_trains_exports_and_resumes(tiny_data, tmp_path, capsys):
     # same config, more steps: refused (config differs); same config reruns from last.pt
     assert main(["train", str(cfg), "--data", str(tiny_data), "--out", str(out), "--steps", "6"]) == 2
     assert "different config" in capsys.readouterr().err
-    assert main(["train", str(cfg), "--data", str(tiny_data), "--out", str(out), "--steps", "4"]) == 0
+    argv = ["train", str(cfg), "--data", str(tiny_data), "--out", str(out), "--steps", "4", "--quiet"]
+    assert main(argv) == 0
+    assert capsys.readouterr().err == ""
     assert [json.loads(x)["step"] for x in (out / "train_log.jsonl").read_text().splitlines()] == [2, 4]
 
 

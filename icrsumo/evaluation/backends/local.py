@@ -1,6 +1,6 @@
 """The local backend: worker processes on this machine (one SUMO each), fed one job at a time
-over a pipe, with a watchdog in the parent that kills and replaces a worker whose agent call
-overruns the timeout (:class:`~icrsumo.evaluation.watch.SlotWatch`) or that dies."""
+over a pipe, with a watchdog in the parent that kills and replaces a worker whose agent call (or
+guard call) overruns the timeout (:class:`~icrsumo.evaluation.watch.SlotWatch`) or that dies."""
 
 from __future__ import annotations
 
@@ -13,22 +13,23 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
-from ...agents.watch import SlotWatch, Unwatched, overran, timeout_message
+from ...agents.watch import AGENT, SlotWatch, Unwatched, overran, overran_by, timeout_message
 from ...errors import raise_interrupted
 from ...procs import die_with_parent
 from ...vocab import ErrorKind
-from ..execute import EpisodeWorker, Outcome
+from ..execute import EpisodeWorker, Outcome, row_guard
 from ..plan import Job
 
 
-def _worker_main(conn: multiprocessing.connection.Connection, slot: Any, parent: int) -> None:
+def _worker_main(conn: multiprocessing.connection.Connection, slot: Any, parent: int,
+                 caller: Any = None) -> None:
     """A pool worker: run the jobs it is sent, one at a time, until it is sent None; it dies
     with its parent (however the parent ends, kill -9 included)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     for sig in (signal.SIGTERM, signal.SIGHUP):   # the parent's handlers, inherited by fork
         signal.signal(sig, signal.SIG_DFL)
     die_with_parent(parent)
-    worker = EpisodeWorker(SlotWatch(slot))
+    worker = EpisodeWorker(SlotWatch(slot, caller))
     try:
         while True:
             try:
@@ -43,12 +44,15 @@ def _worker_main(conn: multiprocessing.connection.Connection, slot: Any, parent:
 
 
 class _Process:
-    """One worker process, its pipe, its watch slot and the job it runs."""
+    """One worker process, its pipe, its watch slots (when its call began; whether the agent or
+    its guard called) and the job it runs."""
 
     def __init__(self, ctx: Any) -> None:
         self.slot = ctx.Value("d", 0.0, lock=False)
+        self.caller = ctx.Value("i", 0, lock=False)
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_worker_main, args=(child, self.slot, os.getpid()), daemon=True)
+        self.proc = ctx.Process(target=_worker_main, args=(child, self.slot, os.getpid(), self.caller),
+                                daemon=True)
         self.proc.start()
         child.close()
         self.job: Job | None = None
@@ -137,9 +141,11 @@ def run_local(jobs: list[Job], workers: int, timeout: float | None = None) -> It
                     if overran(w.slot, timeout, now):
                         busy.pop(conn)
                         job = w.job
+                        who = overran_by(w.caller, row_guard(job))
+                        kind = "AgentTimeout" if who == AGENT else "GuardTimeout"
                         w = replace(w)
                         yield job, Outcome.failure(
-                            ErrorKind.AGENT_TIMEOUT, f"AgentTimeout: {timeout_message(timeout)} "
+                            ErrorKind.AGENT_TIMEOUT, f"{kind}: {timeout_message(timeout, who)} "
                                                      f"(its worker process was stopped)")
                         feed(w)
     finally:
