@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import shutil
 import time
+from pathlib import Path
 
 import pytest
 
@@ -17,9 +18,10 @@ pytestmark = pytest.mark.sumo
 ROUTES = ("tiny_003", "tiny_012")
 
 
-def _browser():
+def _browser(tmp: Path):
     """A headless Chromium driven through chromedriver (a skip only outside CI: in CI the
-    browser must be there)."""
+    browser must be there); its temporary files go into ``tmp`` (a test's tmp_path), not the
+    machine's /tmp."""
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     driver = shutil.which("chromedriver")
     try:
@@ -37,7 +39,9 @@ def _browser():
                 "--window-size=1300,1800"):
         opts.add_argument(arg)
     opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    return webdriver.Chrome(service=Service(driver), options=opts)
+    opts.add_argument(f"--user-data-dir={tmp / 'chromium-profile'}")
+    env = {**os.environ, "TMPDIR": str(tmp)}  # Chromium's own scratch folders
+    return webdriver.Chrome(service=Service(driver, env=env), options=opts)
 
 
 @pytest.fixture(scope="module")
@@ -57,8 +61,8 @@ def test_the_page_is_self_contained(report):
         assert f'data-route="{route}"' in page
 
 
-def test_it_loads_in_chromium_without_errors_and_its_filters_and_clips_work(report):
-    driver = _browser()
+def test_it_loads_in_chromium_without_errors_and_its_filters_and_clips_work(report, tmp_path):
+    driver = _browser(tmp_path)
     try:
         driver.get(report.as_uri())
         routes = driver.find_elements("css selector", "section.route")

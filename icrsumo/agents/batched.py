@@ -4,7 +4,8 @@ all of them in one forward pass.
 
 :func:`start_server` starts the inference process (``spawn``) for one agent spec; it builds
 its agents on ``device`` (``agent_factory(spec, device)``: a learned agent's constructor
-argument). It listens on a Unix socket in a private folder (mode 0700) and accepts only clients
+argument). It listens on a Unix socket (on Linux in the abstract namespace: no file, so a killed
+run leaves nothing behind; elsewhere in a private folder, mode 0700) and accepts only clients
 that know its random key (``multiprocessing.connection``'s HMAC handshake). Its loop is
 single-threaded: it waits until some workers' requests are ready, reads them all, runs them
 with :class:`icrsumo.agents.batching.BatchingCore` (one agent instance per episode, acts in
@@ -32,6 +33,7 @@ import itertools
 import multiprocessing
 import os
 import secrets
+import sys
 import tempfile
 import threading
 import time
@@ -60,7 +62,7 @@ class BatchServer:
     key: bytes = field(repr=False)
     proc: Any
     control: Connection
-    folder: tempfile.TemporaryDirectory
+    folder: tempfile.TemporaryDirectory | None
     stats: dict = field(default_factory=dict)
 
     def stop(self) -> dict:
@@ -78,7 +80,8 @@ class BatchServer:
             self.proc.kill()
             self.proc.join()
         self.control.close()
-        self.folder.cleanup()
+        if self.folder is not None:
+            self.folder.cleanup()
         return self.stats
 
 
@@ -136,8 +139,7 @@ def start_server(spec: str, device: str, max_batch: int = 32, key: bytes | None 
                          "World view, which only the episode worker has", "leave out --batch-inference")
     name = agent_name(spec, factory)
     key = key if key is not None else secrets.token_bytes(32)
-    folder = tempfile.TemporaryDirectory(prefix="icrsumo-batch-")  # mode 0700
-    address = str(Path(folder.name) / "agent.sock")
+    address, folder = _socket_address()
     ctx = spawn_context()
     control, child = ctx.Pipe()
     proc = ctx.Process(target=_serve, args=(spec, address, key, device, max_batch, child, os.getpid()),
@@ -152,10 +154,21 @@ def start_server(spec: str, device: str, max_batch: int = 32, key: bytes | None 
         proc.kill()
         proc.join()
         control.close()
-        folder.cleanup()
+        if folder is not None:
+            folder.cleanup()
         raise InputError("--batch-inference", device, f"the inference process of {spec} failed: {payload}",
                          "pick a device this machine has (cpu, cuda), or leave out --batch-inference")
     return BatchServer(name, address, key, proc, control, folder)
+
+
+def _socket_address() -> tuple[str, tempfile.TemporaryDirectory | None]:
+    """A fresh Unix socket address: on Linux an abstract one (no file to leave behind when the
+    run is killed; the key guards it), elsewhere ``agent.sock`` in a new private folder (which
+    is returned, for its removal)."""
+    if sys.platform.startswith("linux"):
+        return "\0icrsumo-batch-" + secrets.token_hex(16), None
+    folder = tempfile.TemporaryDirectory(prefix="icrsumo-batch-")  # mode 0700
+    return str(Path(folder.name) / "agent.sock"), folder
 
 
 def _serve(spec: str, address: str, key: bytes, device: str, max_batch: int, control: Connection,

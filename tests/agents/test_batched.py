@@ -121,3 +121,20 @@ def test_closed_loop_script_runs_on_cpu(suite, tmp_path):
     assert all(m["episodes"] == 2 and m["crashed"] == 0 and m["same_as_cpu"] == 2 for m in modes.values())
     assert modes["batched@1"]["workers"] == 1 and modes["ipc"]["mean_batch"]["median"] >= 1.0
     assert "| ipc | 2 | 2 |" in proc.stdout
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="abstract sockets are Linux's")
+def test_a_killed_run_leaves_no_socket_folder_behind(tmp_path):
+    """The inference process listens on an abstract socket: a run killed with SIGKILL (no
+    finalizer runs) leaves nothing in the temporary folder."""
+    import os
+    import signal
+
+    code = ("import sys, os; from icrsumo.agents.batched import start_server\n"
+            "s = start_server('bev-ngram', 'cpu', max_batch=4)\n"
+            "print(repr(s.address), flush=True); os.kill(os.getpid(), 9)\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "TMPDIR": str(tmp_path)})
+    assert proc.returncode == -signal.SIGKILL, proc.stderr[-2000:]
+    assert proc.stdout.startswith("'\\x00icrsumo-batch-")
+    assert list(tmp_path.iterdir()) == []
