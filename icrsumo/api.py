@@ -9,18 +9,18 @@
   :mod:`icrsumo.digests`), and two runs compared by it.
 
 All five are exported lazily by :mod:`icrsumo` (``icrsumo.evaluate(...)``). Bad input raises
-:class:`icrsumo.errors.InputError`, whose message is the one line the CLI prints.
+:class:`icrsumo.errors.InputError`, whose message names fields by their keywords (the CLI
+prints the same line naming its options).
 """
 
 from __future__ import annotations
 
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .errors import InputError
+from .errors import Field, InputError
 
 if TYPE_CHECKING:
     from .agents.base import Agent
@@ -50,29 +50,6 @@ def _agents(value: Any) -> tuple | None:
     if isinstance(value, str) or not isinstance(value, (list, tuple)):
         return (value,)
     return tuple(value)
-
-
-#: command-line options -> the keyword arguments of :func:`evaluate` that stand for them
-_KEYWORDS = {"--agent": "agents", "--family": "families", "--replace-agent": "replace_agents",
-             "--rollout-route": "rollout_route", "--agent-timeout": "agent_timeout",
-             "--batch-inference": "batch_inference", "--max-batch": "max_batch",
-             "--inference-processes": "inference_processes", "--baseline-bank": "baseline_bank",
-             "--retry-crashed": "retry_crashed", "--routes": "routes", "--workers": "workers",
-             "--backend": "backend", "--address": "address", "--traffic": "traffic", "--scoring": "scoring",
-             "--suite": "suite", "--seed": "seed", "--out": "out", "--k": "k", "--guard": "guards",
-             "--quiet": "quiet"}
-_OPTION = re.compile("|".join(re.escape(o) for o in sorted(_KEYWORDS, key=len, reverse=True)) + r"(?![\w-])")
-
-
-def for_python(err: InputError) -> InputError:
-    """``err`` in the words of the Python API: command-line options become keyword arguments
-    (``--agent`` -> ``agents``, ``use another --out folder`` -> ``use another out folder``)."""
-    def sub(text: str) -> str:
-        return _OPTION.sub(lambda m: _KEYWORDS[m.group(0)], text)
-
-    if not err.problem:
-        return InputError.of_line(sub(err.file))
-    return InputError(_KEYWORDS.get(err.file, err.file), err.place, sub(err.problem), sub(err.fix))
 
 
 def _options(out: str | Path, suite: str | Path, **given: Any) -> EvalOptions:
@@ -117,18 +94,6 @@ def evaluate(suite: str | Path = "tiny", agents: str | Sequence[str] | None = No
     :class:`icrsumo.errors.InputError` for bad input (nothing is written then) and TypeError
     for an unknown option.
     """
-    try:
-        return evaluate_in_cli_words(suite, agents, families, k, seed, out, workers, quiet, **more)
-    except InputError as err:
-        raise for_python(err) from None
-
-
-def evaluate_in_cli_words(suite: str | Path = "tiny", agents: Any = None,
-                          families: str | Sequence[str] | None = None, k: int = 8, seed: int = 2026,
-                          out: str | Path = "icr_out", workers: int | None = None, quiet: bool = True,
-                          **more: Any) -> EvalResult:
-    """:func:`evaluate`, whose InputErrors name the command line's options (``icrsumo
-    evaluate`` calls this)."""
     from .evaluation import run_evaluation
 
     if "routes" in more:
@@ -218,13 +183,21 @@ def run_episode(scenario: Scenario | str | Path, instruction_set: InstructionSet
     ``agent``: an agent object (``reset(info)``, ``act(obs)``) or a spec as in :func:`evaluate`
     (a fresh agent is made); ``options``: :class:`icrsumo.sim.RunOptions` (agent rate, BEV
     spec); ``callbacks``: :class:`icrsumo.sim.EpisodeCallback` side effects (timings, video,
-    your own). Score it with :func:`icrsumo.metrics.score_episode`."""
+    your own). Score it with :func:`icrsumo.scoring.score_episode`.
+    Raises :class:`icrsumo.errors.InputError` before the episode starts for a scenario whose
+    manifest and network disagree, or an ``instruction_set`` of another route."""
     from .agents.registry import make_agent
-    from .scenario import read_scenario
+    from .networks import load_net
+    from .scenario import check_against_net, read_scenario
     from .sim.episode import RunOptions
     from .sim.episode import run_episode as _run
 
     sc = scenario if not isinstance(scenario, (str, Path)) else read_scenario(Path(scenario))
+    check_against_net(sc, load_net(sc.net))
+    if instruction_set.route_id != sc.route_id:
+        raise InputError(Field("instruction_set"), f"route {instruction_set.route_id!r}",
+                         f"is not a sequence of the scenario's route {sc.route_id!r}",
+                         "pass the instructions generated for this scenario")
     instance = make_agent(agent) if isinstance(agent, str) else agent
     return _run(sc, instruction_set, instance, options or RunOptions(), callbacks)
 
@@ -238,10 +211,7 @@ def digest(out: str | Path = "icr_out") -> str:
     a damaged store."""
     from .digests import folder_digest
 
-    try:
-        return folder_digest(Path(out)).digest
-    except InputError as err:
-        raise for_python(err) from None
+    return folder_digest(Path(out)).digest
 
 
 def compare_digests(out: str | Path, other: str | Path) -> Comparison:
@@ -253,7 +223,4 @@ def compare_digests(out: str | Path, other: str | Path) -> Comparison:
     :class:`icrsumo.errors.InputError`."""
     from .digests import compare
 
-    try:
-        return compare(Path(out), other)
-    except InputError as err:
-        raise for_python(err) from None
+    return compare(Path(out), other)

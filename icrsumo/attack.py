@@ -28,7 +28,7 @@ import numpy as np
 
 from .agents.registry import DEFAULT_AGENT
 from .convert import safe_name
-from .errors import InputError
+from .errors import Field, InputError
 from .evaluation.options import EvalOptions
 from .evaluation.plan import Job, plan_jobs, prepare_suite
 from .evaluation.progress import Progress
@@ -100,15 +100,16 @@ class AttackOptions:
 
     def check(self) -> None:
         if not 1 <= self.budget <= 1024:
-            raise InputError("--budget", str(self.budget), "out of range", "use 1 to 1024 (default 32)")
+            raise InputError(Field("budget"), str(self.budget), "out of range", "use 1 to 1024 (default 32)")
         if self.constraint not in CONSTRAINTS:
-            raise InputError("--constraint", self.constraint, "unknown constraint", "use goal or misleading")
+            raise InputError(Field("constraint"), self.constraint, "unknown constraint",
+                             "use goal or misleading")
         if self.compare is not None and not (Path(self.compare) / "results.sqlite").is_file():
             raise InputError(
-                "--compare",
+                Field("compare"),
                 str(self.compare),
                 "not an evaluate out folder (no results.sqlite)",
-                "pass the --out folder of an icrsumo evaluate run on the same suite",
+                f"pass the {Field('out')} folder of an icrsumo evaluate run on the same suite",
             )
         replace(self.eval_options(), families=("paraphrase",)).check()
 

@@ -24,8 +24,8 @@ import numpy as np
 from .agents.base import Action, AgentError, AgentTimeout, Observation, batch_hook, validate_action
 from .agents.registry import BUILTIN, LLM_PREFIX, REMOTE_PREFIX, agent_factory, load_class
 from .agents.watch import ThreadWatch
-from .cache import DEFAULT_ROUTE, DEFAULT_SUITE, bundled_route
-from .errors import InputError, describe
+from .bundled import DEFAULT_ROUTE, DEFAULT_SUITE, bundled_route
+from .errors import Field, InputError, describe
 
 #: decisions per run (0.1 s each)
 MAX_DECISIONS = 300
@@ -154,13 +154,14 @@ def _drive(factory: Callable, caller: ThreadWatch, scenario, iset, timeout: floa
 def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUITE, timeout: float = 10.0,
                 max_act_ms: float = MAX_ACT_MS, max_decisions: int = MAX_DECISIONS) -> CheckReport:
     """Check agent ``spec``; InputError when the spec cannot be loaded at all (bad input)."""
-    for option, value in (("--timeout", timeout), ("--max-act-ms", max_act_ms)):
+    for option, value in ((Field("timeout"), timeout), (Field("max_act_ms"), max_act_ms)):
         if not 0 < value < float("inf"):
-            unit = "seconds" if option == "--timeout" else "milliseconds"
+            unit = "seconds" if option == Field("timeout") else "milliseconds"
             raise InputError(option, f"{value:g}", f"must be a positive number of {unit}",
                              "give a positive number")
     if max_decisions < 1:
-        raise InputError("--decisions", str(max_decisions), "must be at least 1", "give a positive count")
+        raise InputError(Field("max_decisions"), str(max_decisions), "must be at least 1",
+                         "give a positive count")
     found: list[Finding] = []
 
     def report() -> CheckReport:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import functools
 import os
 import signal
 import sys
@@ -14,10 +15,28 @@ from typing import NoReturn
 
 from . import __version__
 from .defaults import DEFAULT_AGENT, DEFAULT_SUITE
-from .errors import InputError, check_key_env, visible
-from .metrics import DEFAULT_SCORING, scoring_names
+from .errors import Field, InputError, check_key_env, visible
 from .resources import bundled_suites
+from .scoring import DEFAULT_SCORING, scoring_names
+from .traffic import TRAFFIC_LEVELS
 from .vocab import ALL_FAMILIES, CONTROL_FAMILIES, FAMILIES, Family
+
+#: how the command line names the library's fields (errors name fields: :class:`Field`): the
+#: fields whose option is not ``--FIELD`` (``_`` written ``-``); ``"COMMAND FIELD"`` for one
+#: command's own
+_OPTIONS = {"agents": "--agent", "families": "--family", "guards": "--guard",
+            "replace_agents": "--replace-agent", "generate families": "--families",
+            "check-agent max_decisions": "--decisions", "run-episode instruction_set": "--instructions"}
+
+
+def _option(command: str, field: str) -> str:
+    """The option of ``command`` that gives the library's ``field``."""
+    return _OPTIONS.get(f"{command} {field}") or _OPTIONS.get(field) or "--" + field.replace("_", "-")
+
+
+def _names(command: str) -> functools.partial[str]:
+    """How ``command``'s errors name fields (:meth:`InputError.line`): by its options."""
+    return functools.partial(_option, command)
 
 
 def _cmd_convert_routes(args: argparse.Namespace) -> int:
@@ -39,9 +58,9 @@ def _cmd_convert_routes(args: argparse.Namespace) -> int:
         f"{len(report.failures)} failed in {dt:.1f} s -> {args.out}",
         file=sys.stderr,
     )
-    for line in report.failures:
-        print(line, file=sys.stderr)
-    return 2 if report.failures else 0
+    for err in report.errors:
+        print(err.line(_names(args.command)), file=sys.stderr)
+    return 2 if report.errors else 0
 
 
 def _cmd_generate(args: argparse.Namespace) -> int:
@@ -71,32 +90,25 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     written, failures = generate(Path(args.scenarios), Path(args.out), opts, refuse_empty=True)
     print(f"{len(written)} routes x (1 + {len(families)} x {args.k}) sequences, {len(failures)} failed "
           f"in {time.perf_counter() - t0:.1f} s -> {args.out}", file=sys.stderr)
-    for line in failures:
-        print(line, file=sys.stderr)
+    for err in failures:
+        print(err.line(_names(args.command)), file=sys.stderr)
     return 2 if failures else 0
 
 
 def _cmd_run_episode(args: argparse.Namespace) -> int:
     from .agents.registry import DEFAULT_AGENT, make_agent
+    from .api import run_episode
     from .instructions.store import read_instruction_sets
     from .logs import result_to_dict, write_log
-    from .metrics import score_episode
     from .scenario import read_scenario
+    from .scoring import score_episode
     from .sim.callbacks import VideoRecorder
-    from .sim.episode import run_episode
 
     sc = read_scenario(Path(args.scenario))
     sets = read_instruction_sets(Path(args.instructions))
-    from .networks import load_net
-    from .scenario import check_against_net
-
-    check_against_net(sc, load_net(sc.net))
     for option, value in (("--log", args.log), ("--video", args.video)):
         if value is not None and (not str(value).strip() or Path(value).is_dir()):
             raise InputError(option, str(value), "is a folder (or empty), not a file", "give a file path")
-    if sets[0].route_id != sc.route_id:
-        raise InputError(args.instructions, "route_id", f"is for route {sets[0].route_id!r}, the scenario is "
-                         f"route {sc.route_id!r}", "pass the instruction file generated for this scenario")
     chosen = [s for s in sets if s.family == args.family and (s.k == args.k or args.family == "baseline")]
     if not chosen:
         have = sorted({f"{s.family}:{s.k}" for s in sets})
@@ -157,7 +169,7 @@ def _agents(args: argparse.Namespace) -> tuple[str, ...]:
     from .agents.llm import with_options
 
     if args.llm_key_env:
-        check_key_env(args.llm_key_env, "--llm-key-env", args.llm_key_env)
+        check_key_env(args.llm_key_env, Field("llm_key_env"), args.llm_key_env)
 
     return tuple(with_options(s, args.llm_key_env, args.llm_image) for s in specs)
 
@@ -172,11 +184,11 @@ def _add_llm_options(p: argparse.ArgumentParser) -> None:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from .api import evaluate_in_cli_words
+    from .api import evaluate
 
     t0 = time.perf_counter()
     routes = _split_list(args.routes, "--routes")
-    result = evaluate_in_cli_words(
+    result = evaluate(
         suite=args.suite, agents=_agents(args) or None,
         families=_split_list(args.family, "--family") or None,
         k=args.k, seed=args.seed, out=args.out, workers=args.workers, quiet=args.quiet,
@@ -260,7 +272,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
     elif args.what == "routes":
         from .routes import read_routes, suite_file
 
-        routes, _ = read_routes(suite_file(args.suite, "--suite"))
+        routes, _ = read_routes(suite_file(args.suite))
         for r in routes:
             print(f"{r.id:24} {r.town:10} {len(r.waypoints)} waypoints")
     elif args.what == "agents":
@@ -399,26 +411,28 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (fix: see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
-        prog="icrsumo",
-        description="Instruction-robustness benchmark for language-conditioned driving on SUMO.",
-    )
-    parser.add_argument("--version", action="version", version=f"icrsumo {__version__}")
-    parser.add_argument("--debug", action="store_true",
-                        help="show the traceback of an error instead of its one line")
-    sub = parser.add_subparsers(dest="command", required=True)
+#: what ``parser.add_subparsers()`` returns: where each subcommand adds its parser
+_Commands = argparse._SubParsersAction
 
+
+@functools.cache
+def _suites() -> str:
+    """The bundled suites' names, for help texts."""
+    return ", ".join(bundled_suites())
+
+
+def _add_traffic(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--traffic", choices=list(TRAFFIC_LEVELS), default="normal")
+
+
+def _add_convert_routes(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo convert-routes``."""
     p = sub.add_parser(
         "convert-routes", help="leaderboard route XML -> runnable SUMO scenarios",
-        description="Convert a leaderboard-style route file (or a bundled suite: tiny, short, "
-        "long, train, langauto-tiny, langauto-short, langauto-long, carla-train, carla-focus, "
-        "carla-fidelity) into "
+        description=f"Convert a leaderboard-style route file (or a bundled suite: {_suites()}) into "
         "SUMO scenarios with background traffic.",
     )
-    p.add_argument("routes", help="route XML file, or the name of a bundled suite (tiny, short, long, "
-                                  "train, langauto-tiny, langauto-short, langauto-long, carla-train, "
-                                  "carla-focus, carla-fidelity)")
+    p.add_argument("routes", help=f"route XML file, or the name of a bundled suite ({_suites()})")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--net", type=Path, help="use this .net.xml for every route")
     p.add_argument("--xodr", type=Path, help="convert this OpenDRIVE file (cached) for every route")
@@ -427,7 +441,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--coords", choices=["sumo", "carla"], default=None,
                    help="waypoint frame: sumo (default) or CARLA's left-handed frame (a bundled "
                         "suite's own frame by default: carla for langauto-* and carla-*)")
-    p.add_argument("--traffic", choices=["none", "light", "normal", "dense"], default="normal")
+    _add_traffic(p)
     p.add_argument("--max-snap", type=float, default=10.0,
                    help="farthest a waypoint may lie from a drivable lane (m, default 10)")
     p.add_argument("--seed", type=int, default=0,
@@ -438,6 +452,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="worker processes (default: number of cores)")
     p.set_defaults(func=_cmd_convert_routes)
 
+
+def _add_generate(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo generate``."""
     g = sub.add_parser(
         "generate", help="baseline instructions + counterfactual variants per route",
         description="Write, per converted route, the baseline instruction sequence and K variant "
@@ -462,6 +479,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
     g.set_defaults(func=_cmd_generate)
 
+
+def _add_run_episode(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo run-episode``."""
     e = sub.add_parser(
         "run-episode", help="drive one closed-loop episode and score it",
         description="Run one scenario with one instruction sequence and one agent in SUMO; print "
@@ -480,6 +500,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "browsers; .mp4: MPEG-4 Part 2; .avi: Motion JPEG)")
     e.set_defaults(func=_cmd_run_episode)
 
+
+def _add_evaluate(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo evaluate``."""
     v = sub.add_parser(
         "evaluate", help="the paired ICR protocol: baseline vs counterfactual instructions",
         description="Run every agent on every route with the baseline instructions and K variants "
@@ -487,7 +510,7 @@ def build_parser() -> argparse.ArgumentParser:
         "and write summary.json, tables and figures.",
     )
     v.add_argument("--suite", default=DEFAULT_SUITE,
-                   help=f"a bundled suite ({', '.join(bundled_suites())}; default {DEFAULT_SUITE}; "
+                   help=f"a bundled suite ({_suites()}; default {DEFAULT_SUITE}; "
                    "icrsumo list suites), a route XML file or a convert-routes folder")
     v.add_argument("--agent", action="append",
                    help="built-in name, module:Class, path/file.py:Class, remote:http://HOST:PORT or "
@@ -502,7 +525,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="worker processes, one SUMO each (default: number of cores)")
     v.add_argument("--backend", default="local", help="local (default) or ray")
     v.add_argument("--address", help="Ray cluster address for --backend ray")
-    v.add_argument("--traffic", choices=["none", "light", "normal", "dense"], default="normal")
+    _add_traffic(v)
     v.add_argument("--out", default="icr_out", help="output folder (default icr_out)")
     v.add_argument("--rollout-route", help="route of the paired rollout figure (default: the first)")
     v.add_argument("--baseline-bank", type=Path, metavar="FILE",
@@ -537,6 +560,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_llm_options(v)
     v.set_defaults(func=_cmd_evaluate)
 
+
+def _add_attack(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo attack``."""
     at = sub.add_parser(
         "attack", help="search for instruction rewrites that make an agent fail (resumable)",
         description="Per route, a seeded (1+1) evolutionary search over rewrites of the baseline "
@@ -555,7 +581,7 @@ def build_parser() -> argparse.ArgumentParser:
     at.add_argument("--compare", type=Path, metavar="EVAL_OUT",
                     help="an evaluate out folder on the same suite: its fixed grid beside the search")
     at.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes")
-    at.add_argument("--traffic", choices=["none", "light", "normal", "dense"], default="normal")
+    _add_traffic(at)
     at.add_argument("--agent-timeout", type=float, default=60.0, metavar="S",
                     help="seconds an agent call may take (default 60; 0: no limit)")
     _add_llm_options(at)
@@ -568,6 +594,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="also attack every agent behind this instruction guard (as evaluate's; repeatable)")
     at.set_defaults(func=_cmd_attack)
 
+
+def _add_show(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo show``."""
     sh = sub.add_parser(
         "show", help="watch a stored episode: replay it, check it is the same, write its video and a still",
         description="Re-simulate one stored episode of an evaluate (or attack) folder, check that the "
@@ -585,14 +614,21 @@ def build_parser() -> argparse.ArgumentParser:
     sh.add_argument("--dir", help="where to write the video and the still (default OUT/show/...)")
     sh.set_defaults(func=_cmd_show)
 
+
+def _add_list(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo list``."""
     ls = sub.add_parser("list", help="what exists: suites, a suite's routes, agents, guards, families",
                         description="Print the bundled suites (name, coordinate frame, file), the routes of "
                         "a suite (--suite), the registered agents (the default marked), the instruction "
                         "guards or the families.")
     ls.add_argument("what", choices=["suites", "routes", "agents", "guards", "families"])
-    ls.add_argument("--suite", default="tiny", help="the suite whose routes to list (default tiny)")
+    ls.add_argument("--suite", default=DEFAULT_SUITE,
+                    help=f"the suite whose routes to list (default {DEFAULT_SUITE})")
     ls.set_defaults(func=_cmd_list)
 
+
+def _add_report(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo report``."""
     r = sub.add_parser("report", help="rebuild summary, tables and figures of an evaluation folder")
     r.add_argument("out", help="the --out folder of icrsumo evaluate")
     r.add_argument("--quiet", action="store_true")
@@ -601,6 +637,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "stored scores)")
     r.set_defaults(func=_cmd_report)
 
+
+def _add_digest(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo digest``."""
     dg = sub.add_parser(
         "digest", help="one SHA-256 over every stored episode of a run; compare two runs with it",
         description="Print the digest of an evaluation folder: one SHA-256 over every episode in "
@@ -614,6 +653,9 @@ def build_parser() -> argparse.ArgumentParser:
     dg.add_argument("other", nargs="?", help="a second out folder, or a digest (sha256:HEX)")
     dg.set_defaults(func=_cmd_digest)
 
+
+def _add_check_agent(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo check-agent``."""
     ca = sub.add_parser(
         "check-agent", help="check that an agent follows the agent protocol, in plain words",
         description="Load an agent spec, check reset/act/name/privileged, drive two episodes of a short "
@@ -629,6 +671,9 @@ def build_parser() -> argparse.ArgumentParser:
     ca.add_argument("--decisions", type=int, default=300, help="decisions per run at most (default 300)")
     ca.set_defaults(func=_cmd_check_agent)
 
+
+def _add_serve_agent(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo serve-agent``."""
     sa = sub.add_parser(
         "serve-agent", help="serve an agent over HTTP (protocol icrsumo-agent/1) for remote:URL",
         description="Wrap an agent spec in an HTTP server: one agent instance per episode session, "
@@ -646,6 +691,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "(clients: remote:http://HOST:PORT?key_env=VAR); advised off 127.0.0.1")
     sa.set_defaults(func=_cmd_serve_agent)
 
+
+def _add_serve_llm(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo serve-llm``."""
     sl = sub.add_parser(
         "serve-llm", help="serve a small language model on 127.0.0.1 (OpenAI-compatible) for llm:MODEL@URL",
         description="Run llama.cpp's OpenAI-compatible server (the icrsumo[llm] extra) for a GGUF file, "
@@ -658,6 +706,9 @@ def build_parser() -> argparse.ArgumentParser:
     sl.add_argument("--threads", type=int, default=2, help="CPU threads of the model (default 2)")
     sl.set_defaults(func=_cmd_serve_llm)
 
+
+def _add_collect(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo collect``."""
     c = sub.add_parser(
         "collect", help="expert driving data (BEV, speed, instruction, expert plan) for training",
         description="Drive the train split (or carla-train, carla-focus on CARLA's towns; never an "
@@ -670,7 +721,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--passes", type=int, default=3, help="passes per route; pass 0 clean, others perturbed")
     c.add_argument("--seed", type=int, default=0, help="seed of phrasings and perturbations")
     c.add_argument("--every", type=int, default=2, help="store every n-th agent step (default 2: 5 Hz)")
-    c.add_argument("--traffic", choices=["none", "light", "normal", "dense"], default="normal")
+    _add_traffic(c)
     c.add_argument("--limit", type=int, default=0, help="only the first N routes (0: all)")
     c.add_argument("--driver", help="learned agent (name or checkpoint) that drives while the expert "
                    "labels (DAgger)")
@@ -678,6 +729,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="worker processes (default: number of cores)")
     c.set_defaults(func=_cmd_collect)
 
+
+def _add_train(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo train``."""
     t = sub.add_parser(
         "train", help="train a learned agent on collected data (resumes from OUT/last.pt)",
         description="Behaviour cloning of the expert's plan; config in a TOML file; writes "
@@ -699,6 +753,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="no progress on stderr (stages, steps and loss, validation lines)")
     t.set_defaults(func=_cmd_train)
 
+
+def _add_export_exact(sub: _Commands) -> None:
+    """Add the parser of ``icrsumo export-exact``."""
     x = sub.add_parser(
         "export-exact", help="make a trained checkpoint exact: the same bits on every CPU, no torch to run",
         description="Quantise a model.pt of icrsumo train to integer weights and activations whose sums "
@@ -714,6 +771,27 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--percentile", type=float, default=99.99,
                    help="percentile of each activation mapped to its top (default 99.99)")
     x.set_defaults(func=_cmd_export_exact)
+
+
+#: the subcommands, in the order ``icrsumo --help`` lists them: each adds its parser
+_SUBCOMMANDS = (_add_convert_routes, _add_generate, _add_run_episode, _add_evaluate, _add_attack, _add_show,
+                _add_list, _add_report, _add_digest, _add_check_agent, _add_serve_agent, _add_serve_llm,
+                _add_collect, _add_train, _add_export_exact)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``icrsumo`` parser: one subparser per subcommand (:data:`_SUBCOMMANDS`), each
+    running its ``_cmd_*`` function; ``--debug`` before or after the subcommand."""
+    parser = _Parser(
+        prog="icrsumo",
+        description="Instruction-robustness benchmark for language-conditioned driving on SUMO.",
+    )
+    parser.add_argument("--version", action="version", version=f"icrsumo {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the traceback of an error instead of its one line")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for add in _SUBCOMMANDS:
+        add(sub)
     for command in sub.choices.values():  # --debug also after the subcommand
         command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                              help="show the traceback of an error instead of its one line")
@@ -757,7 +835,7 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as err:
         if args.debug:
             raise
-        print(f"icrsumo: error: {err.line()}", file=sys.stderr)
+        print(f"icrsumo: error: {err.line(_names(args.command))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM / SIGHUP (errors.Stopped)
         signum = getattr(err, "signum", signal.SIGINT)

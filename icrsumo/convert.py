@@ -25,7 +25,7 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from .errors import InputError, check_seed
+from .errors import Field, InputError, check_seed
 from .fsio import OutFolder, check_out_dir, dumps_json, replace_dir_atomic, sha256_file, write_atomic
 from .networks import convert_xodr, load_net
 from .procs import spawn_context
@@ -70,30 +70,37 @@ class ConvertOptions:
 
     def check(self) -> None:
         if self.coords not in ("sumo", "carla"):
-            raise InputError("--coords", "", f"unknown value {self.coords!r}", "use sumo or carla")
+            raise InputError(Field("coords"), "", f"unknown value {self.coords!r}", "use sumo or carla")
         if self.traffic not in TRAFFIC_LEVELS:
-            raise InputError("--traffic", "", f"unknown level {self.traffic!r}",
+            raise InputError(Field("traffic"), "", f"unknown level {self.traffic!r}",
                              f"use one of {', '.join(TRAFFIC_LEVELS)}")
         if sum(x is not None for x in (self.net, self.xodr, self.net_dir)) > 1:
-            raise InputError("--net/--xodr/--net-dir", "", "more than one network source given",
-                             "give only one of --net, --xodr, --net-dir")
+            raise InputError(f"{Field('net')}/{Field('xodr')}/{Field('net_dir')}", "",
+                             "more than one network source given",
+                             f"give only one of {Field('net')}, {Field('xodr')}, {Field('net_dir')}")
         if not 0 < self.max_snap <= 1000:
-            raise InputError("--max-snap", "", f"{self.max_snap:g} is not in (0, 1000]",
+            raise InputError(Field("max_snap"), "", f"{self.max_snap:g} is not in (0, 1000]",
                              "give a distance in metres")
         if not 0 <= self.warmup <= 3600:
-            raise InputError("--warmup", "", f"{self.warmup:g} is not in [0, 3600]", "give seconds >= 0")
+            raise InputError(Field("warmup"), "", f"{self.warmup:g} is not in [0, 3600]", "give seconds >= 0")
         if self.workers < 1:
-            raise InputError("--workers", "", "must be at least 1", "give a positive count")
+            raise InputError(Field("workers"), "", "must be at least 1", "give a positive count")
         check_seed(self.seed)
 
 
 @dataclass
 class ConvertReport:
-    """What a conversion did: scenario folder names converted or reused, and failures."""
+    """What a conversion did: scenario folder names converted or reused, and the routes that
+    failed: ``errors`` (one InputError each, in file order) and ``failures`` (their lines)."""
 
     converted: list[str] = field(default_factory=list)
     reused: list[str] = field(default_factory=list)
-    failures: list[str] = field(default_factory=list)
+    errors: list[InputError] = field(default_factory=list)
+
+    @property
+    def failures(self) -> list[str]:
+        """One line per route that failed (:meth:`InputError.line`)."""
+        return [e.line() for e in self.errors]
 
 
 def route_seed(base: int, route_id: str) -> int:
@@ -131,12 +138,13 @@ def _resolve_nets(
         place = f"route {s.id}"
         if not s.town:
             errors[s.id] = InputError(routes_file, place, "missing attribute 'town'",
-                                      "add town=\"...\" or pass --net FILE.net.xml")
+                                      f"add town=\"...\" or pass {Field('net')} FILE.net.xml")
             continue
         if opts.net_dir is not None:
             d = Path(opts.net_dir)
             if not d.is_dir():
-                raise InputError(d, "", "--net-dir folder not found", "check the --net-dir path")
+                raise InputError(d, "", f"{Field('net_dir')} folder not found",
+                                 f"check the {Field('net_dir')} path")
             net_file, xodr = d / f"{s.town}.net.xml", d / f"{s.town}.xodr"
             if net_file.is_file():
                 try:
@@ -159,8 +167,8 @@ def _resolve_nets(
         else:
             errors[s.id] = InputError(
                 routes_file, place, f"unknown town {s.town!r}",
-                f"use a bundled town ({', '.join(towns)}) or pass --net FILE.net.xml, "
-                "--xodr FILE.xodr or --net-dir DIR",
+                f"use a bundled town ({', '.join(towns)}) or pass {Field('net')} FILE.net.xml, "
+                f"{Field('xodr')} FILE.xodr or {Field('net_dir')} DIR",
             )
     return resolved, errors
 
@@ -235,9 +243,9 @@ def _ego_routes(edges: tuple[str, ...]) -> str:
 def _convert_one(
     spec: RouteSpec, routes_file: str, net_path: str, town: str, out_dir: str,
     opts: ConvertOptions,
-) -> tuple[str, str, str]:
-    """Convert one route (runs in a worker process). Returns (status, folder name, message)
-    with status 'converted', 'reused' or 'failed'."""
+) -> tuple[str, str, InputError | None]:
+    """Convert one route (runs in a worker process). Returns (status, folder name, error)
+    with status 'converted', 'reused' or 'failed' (with its error)."""
     name = safe_name(spec.id)
     final = Path(out_dir) / "scenarios" / name
     try:
@@ -249,7 +257,7 @@ def _convert_one(
                 old_doc = json.loads(old.read_text(encoding="utf-8"))
                 if isinstance(old_doc, dict) and old_doc.get("source_hash") == source_hash:
                     read_scenario(final)  # still whole: its files and network are there
-                    return "reused", name, ""
+                    return "reused", name, None
             except (OSError, ValueError, RecursionError, InputError):
                 pass
         pts = [net.to_sumo(w.x, w.y, w.yaw, opts.coords) for w in spec.waypoints]
@@ -257,7 +265,7 @@ def _convert_one(
             route = plan_route(net, pts, opts.max_snap)
         except MatchError as err:
             place = f"route {spec.id}, waypoint {err.index}"
-            fix = ("move the waypoint onto a road, check --coords, or raise --max-snap"
+            fix = (f"move the waypoint onto a road, check {Field('coords')}, or raise {Field('max_snap')}"
                    if err.kind == "far" else
                    "check the waypoint order and that the network connects them")
             raise InputError(routes_file, place, err.detail, fix) from None
@@ -312,11 +320,12 @@ def _convert_one(
         finally:
             if staging.exists():
                 shutil.rmtree(staging, ignore_errors=True)
-        return "converted", name, ""
+        return "converted", name, None
     except InputError as err:
-        return "failed", name, err.line()
+        return "failed", name, err
     except Exception as err:  # a simulator tool failed: report it for this route, go on
-        return "failed", name, f"{routes_file}: route {spec.id}: {type(err).__name__}: {err}"
+        why = f"{routes_file}: route {spec.id}: {type(err).__name__}: {err}"
+        return "failed", name, InputError.of_line(why)
 
 
 def convert_routes(routes_file: Path, out_dir: Path, opts: ConvertOptions,
@@ -349,16 +358,16 @@ def convert_routes(routes_file: Path, out_dir: Path, opts: ConvertOptions,
             jobs.append((s, str(routes_file), str(placed[src]), name, str(out_dir), opts))
     names = [safe_name(s.id) for s in specs]
     clash = {n for n in names if names.count(n) > 1}
-    failed: list[tuple[int, str]] = [(i, e.line()) for i, e in parse_errors]
+    failed: list[tuple[int, InputError]] = list(parse_errors)
     ok_jobs = []
     for job in jobs:
         if safe_name(job[0].id) in clash:
             failed.append((job[0].index, InputError(
                 routes_file, f"route {job[0].id}", "route id maps to the same folder name as "
-                "another route", "make route ids differ in letters or digits").line()))
+                "another route", "make route ids differ in letters or digits")))
         else:
             ok_jobs.append(job)
-    results: dict[str, tuple[str, str, str]] = {}
+    results: dict[str, tuple[str, str, InputError | None]] = {}
     # spawned, not forked: the caller may hold libsumo, torch or Ray threads, which a fork copies
     # in whatever state they are (a forked conversion worker died that way in a full test run)
     with ProcessPoolExecutor(max_workers=min(opts.workers, max(1, len(ok_jobs))),
@@ -370,20 +379,20 @@ def convert_routes(routes_file: Path, out_dir: Path, opts: ConvertOptions,
     index = []
     for s in specs:
         if s.id in net_errors:
-            failed.append((s.index, net_errors[s.id].line()))
+            failed.append((s.index, net_errors[s.id]))
             continue
         if s.id not in results:
             continue
-        status, name, msg = results[s.id]
+        status, name, err = results[s.id]
         if status == "failed":
-            failed.append((s.index, msg))
+            failed.append((s.index, err))
             continue
         (report.converted if status == "converted" else report.reused).append(name)
         index.append({"id": s.id, "town": s.town, "dir": f"scenarios/{name}"})
-    report.failures = [msg for _, msg in sorted(failed)]
-    if refuse_empty and report.failures and not (report.converted or report.reused):
+    report.errors = [err for _, err in sorted(failed, key=lambda f: f[0])]
+    if refuse_empty and report.errors and not (report.converted or report.reused):
         before.undo()
-        raise InputError.of_line(report.failures[0])
+        raise report.errors[0]
     write_atomic(out_dir / "index.json", dumps_json({
         "format": "icrsumo-index/1", "routes_file": routes_file.name,
         "scenarios": index, "failures": report.failures,

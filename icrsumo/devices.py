@@ -5,14 +5,14 @@ from __future__ import annotations
 
 import re
 
-from .errors import InputError
+from .errors import Field, InputError
 
 _DEVICE = re.compile(r"(cpu|auto|cuda(:\d+)?)")
 
 
-def check_device(name: str, option: str = "--device") -> str:
+def check_device(name: str, option: object = Field("device")) -> str:
     """``name`` when it is a device this machine has (``auto`` always is); an InputError naming
-    ``option`` otherwise: an unknown name, CUDA without a GPU, or a GPU index out of range."""
+    the field ``option`` otherwise: an unknown name, CUDA without a GPU, or a GPU index out of range."""
     fix = "use cpu, cuda, cuda:N or auto"
     if not isinstance(name, str) or not _DEVICE.fullmatch(name):
         raise InputError(option, str(name), "unknown device", fix)

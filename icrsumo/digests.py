@@ -8,7 +8,7 @@ The byte format (version 1), defined by :func:`digest_lines`:
 * every line is a JSON array as ``json.dumps(array, ensure_ascii=True, separators=(",", ":"))``
   writes it (ASCII only: other characters as ``\\uXXXX`` escapes, no spaces), then ``\\n``;
 * the first line is ``["icrsumo-digest",1,SCORING]``, SCORING the name of the scoring rules
-  (``lb1``, ``lb2``: :data:`icrsumo.metrics.SCORINGS`);
+  (``lb1``, ``lb2``: :data:`icrsumo.scoring.SCORINGS`);
 * then one line per stored episode, sorted by its key (agent, route_id, family, k, seed),
   strings by code point and integers by value:
   ``[AGENT,ROUTE_ID,FAMILY,K,SEED,"log",HEX]`` with HEX the SHA-256 (64 lowercase hex digits)
@@ -174,7 +174,7 @@ def _check_summary(out: Path, hashes: Sequence[EpisodeHash], digest: str, scorin
     """What ``OUT/summary.json``'s digest says against the store's: "" when it agrees, else one
     line (no summary, no digest in it, another digest)."""
     from .fsio import read_json
-    from .metrics import SCORINGS
+    from .scoring import SCORINGS
 
     path = out / "summary.json"
     if not path.is_file():
@@ -208,7 +208,7 @@ def folder_digest(out: str | Path) -> FolderDigest:
     evaluation folder, a configuration without a scoring, and a damaged store."""
     from .errors import expect
     from .evaluation.plan import read_config
-    from .metrics import SCORINGS, scoring_names
+    from .scoring import SCORINGS, scoring_names
 
     out = Path(out)
     cfg = read_config(out)

@@ -32,7 +32,7 @@ Reward per step, in route-completion points (the Driving Score's units, 0-100)::
 done / RD); ``truncated`` when it ends in a TO class (route timeout, agent blocked, stuck,
 simulator error). At the end ``info`` holds the Leaderboard metrics (``DS``, ``RC``, ``IS``,
 ``infractions``, ``termination``, ``termination_class``, ``outside_lanes_pct``) as
-``icrsumo.metrics.score_episode`` gives them for the episode's log.
+``icrsumo.scoring.score_episode`` gives them for the episode's log.
 
 ``reset(seed=...)`` seeds ``np_random`` (action-space sampling); the simulation itself is
 fixed by the scenario (its SUMO seed and traffic), so every reset starts the same episode and
@@ -56,13 +56,15 @@ import numpy as np
 from gymnasium import spaces
 
 from .agents.base import Action, AgentError, Observation
-from .cache import DEFAULT_ROUTE, DEFAULT_SUITE, bundled_route
+from .bundled import DEFAULT_ROUTE, DEFAULT_SUITE, bundled_route
 from .dynamics import Control, VehicleParams
 from .errors import InputError
 from .instructions.store import read_instruction_sets
-from .metrics import PENALTIES, CollisionCounter, score_episode
 from .render import to_rgb
 from .scenario import Scenario, read_scenario
+from .scoring import score_episode
+from .scoring.lb1 import CollisionCounter
+from .scoring.penalties import PENALTIES
 from .sim.callbacks import EpisodeCallback, StepRecord
 from .sim.episode import Episode, RunOptions
 from .types import InstructionSet
@@ -111,7 +113,7 @@ def _reset_options(options: object) -> dict[str, Any]:
 
 class _Penalties(EpisodeCallback):
     """The penalised event infractions of an episode as they happen (``kinds``, in order): the
-    collisions :class:`~icrsumo.metrics.CollisionCounter` counts (on the positions the log
+    collisions :class:`~icrsumo.scoring.lb1.CollisionCounter` counts (on the positions the log
     stores), every red light and stop sign."""
 
     def __init__(self) -> None:
@@ -140,7 +142,7 @@ class ICRDriveEnv(gym.Env):
     ``scenario`` / ``instructions``: a scenario folder (``convert-routes``) and its route's
     instruction file (``generate``), or Scenario / InstructionSet objects; when both are None,
     the bundled ``route`` of ``suite`` (default tiny_003, 78 m, one left turn) converted and
-    generated into the cache on first use (:func:`icrsumo.cache.bundled_route`).
+    generated into the cache on first use (:func:`icrsumo.bundled.bundled_route`).
     ``family`` / ``k``: which sequence of the route (default the baseline).
     """
 

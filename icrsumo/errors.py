@@ -4,34 +4,68 @@ from __future__ import annotations
 
 import re
 import unicodedata
+from collections.abc import Callable
+from dataclasses import dataclass
+
+#: the character that brackets a mention of a field in an error's text (``str(Field(name))``)
+_MARK = "\x1f"
+_MENTION = re.compile(f"{_MARK}([A-Za-z_][A-Za-z0-9_]*){_MARK}")
+
+
+@dataclass(frozen=True)
+class Field:
+    """A field of the options a call takes, by its Python name (``suite``, ``rollout_route``):
+    what an :class:`InputError` is about (its first argument), or a mention of one in its text
+    (``f"use another {Field('out')} folder"``). The error names it in its reader's words: the
+    Python API by the keyword (``out``), the CLI by its option (``--out``, ``icrsumo.cli``
+    maps them)."""
+
+    name: str
+
+    def __str__(self) -> str:
+        return f"{_MARK}{self.name}{_MARK}"
+
+
+def _as_named(name: str) -> str:
+    return name
 
 
 class InputError(Exception):
-    """Bad user input. The CLI prints ``str(err)`` as one line and exits with status 2.
+    """Bad user input. The CLI prints :meth:`line` as one line and exits with status 2.
 
-    ``file`` is the offending file (or option), ``place`` where in it (route id, waypoint index,
-    line), ``problem`` what is wrong and ``fix`` what the user should do.
+    ``file`` is the offending file, or a :class:`Field` (then also ``field``: its name);
+    ``place`` where in it (route id, waypoint index, line, the value given), ``problem`` what
+    is wrong and ``fix`` what the user should do. ``str(err)`` names fields as the Python API
+    does (the keyword); the texts may mention fields (``str(Field(name))``).
     """
 
-    def __init__(self, file: str, place: str, problem: str, fix: str = "") -> None:
+    def __init__(self, file: object, place: str, problem: str, fix: str = "") -> None:
+        self.field = file.name if isinstance(file, Field) else None
         self.file = str(file)
         self.place = place
         self.problem = problem
         self.fix = fix
         super().__init__(self.line())
 
+    def __reduce__(self) -> tuple:  # pickled whole (a worker's error reaches its parent as it was)
+        file = Field(self.field) if self.field is not None else self.file
+        return type(self), (file, self.place, self.problem, self.fix)
+
     @classmethod
     def of_line(cls, line: str) -> InputError:
         """The error whose :meth:`line` is ``line`` (one already formatted, e.g. by a worker)."""
         return cls(line, "", "")
 
-    def line(self) -> str:
+    def line(self, names: Callable[[str], str] = _as_named) -> str:
+        """The one line: ``file: place: problem (fix: fix)``, every field named by
+        ``names(field)`` (default: its Python name; the CLI passes its options')."""
         if not self.problem:
-            return " ".join(self.file.split())
+            return _MENTION.sub(lambda m: names(m.group(1)), " ".join(self.file.split()))
         where = f"{self.file}: {self.place}: " if self.place else f"{self.file}: "
         text = where + self.problem
         if self.fix:
             text += f" (fix: {self.fix})"
+        text = _MENTION.sub(lambda m: names(m.group(1)), text)
         return visible(display_url(" ".join(text.split())))
 
 
@@ -87,18 +121,31 @@ def describe(err: BaseException) -> str:
     return f"{type(err).__name__}: {err}{where}"
 
 
+#: how messages name the JSON types
+KIND_NAMES: dict[type, str] = {int: "an integer", float: "a number", str: "a string", list: "a list",
+                               dict: "an object", bool: "true or false"}
+
+
+def is_kind(value: object, kind: type | tuple[type, ...]) -> bool:
+    """Whether ``value`` is of ``kind`` (a bool is not an int or a float here)."""
+    kinds = kind if isinstance(kind, tuple) else (kind,)
+    return isinstance(value, kinds) and not (isinstance(value, bool) and bool not in kinds)
+
+
+def type_problem(value: object, kind: type | tuple[type, ...], what: str) -> str:
+    """``what`` must be <kind>, not <the type of value>: how a value of the wrong type is named."""
+    kinds = kind if isinstance(kind, tuple) else (kind,)
+    want = " or ".join(KIND_NAMES.get(k, k.__name__) for k in kinds)
+    got = "null" if value is None else type(value).__name__
+    return f"{what} must be {want}, not {got}"
+
+
 def expect(value: object, kind: type | tuple[type, ...], file: object, place: str, what: str,
            fix: str = "") -> object:
     """``value`` if it is of ``kind`` (a bool is not an int or a float here), else an
     InputError: ``file``: ``place``: ``what`` must be <kind>, not <its type> (fix: ``fix``)."""
-    kinds = kind if isinstance(kind, tuple) else (kind,)
-    ok = isinstance(value, kinds) and not (isinstance(value, bool) and bool not in kinds)
-    if not ok:
-        names = {int: "an integer", float: "a number", str: "a string", list: "a list", dict: "an object",
-                 bool: "true or false"}
-        want = " or ".join(names.get(k, k.__name__) for k in kinds)
-        got = "null" if value is None else type(value).__name__
-        raise InputError(file, place, f"{what} must be {want}, not {got}", fix)
+    if not is_kind(value, kind):
+        raise InputError(file, place, type_problem(value, kind, what), fix)
     return value
 
 
@@ -132,16 +179,17 @@ def raise_stopped(signum: int, frame: object) -> None:
 MAX_SEED = 2**63 - 1
 
 
-def check_seed(seed: object, option: str = "--seed") -> int:
-    """``seed`` when it is a whole number in 0 .. :data:`MAX_SEED`, else an InputError."""
+def check_seed(seed: object, where: object = Field("seed")) -> int:
+    """``seed`` when it is a whole number in 0 .. :data:`MAX_SEED`, else an InputError naming
+    ``where`` (the field ``seed``, or a file's place)."""
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
-        raise InputError(option, short(seed), "out of range", "use a whole number from 0 to 2**63 - 1")
+        raise InputError(where, short(seed), "out of range", "use a whole number from 0 to 2**63 - 1")
     return seed
 
 
-def check_key_text(key: str, var: str, option: str, value: str) -> str:
+def check_key_text(key: str, var: str, option: Field, value: str) -> str:
     """``key`` (read from the environment variable ``var``) when every character of it is
-    printable ASCII, which is what an HTTP header carries; an InputError naming ``option``,
+    printable ASCII, which is what an HTTP header carries; an InputError naming the field ``option``,
     its ``value`` and ``var`` otherwise (the position of the first bad character, never the
     key)."""
     bad = next((i for i, c in enumerate(key) if not (c.isascii() and c.isprintable())), None)
@@ -153,9 +201,9 @@ def check_key_text(key: str, var: str, option: str, value: str) -> str:
     return key
 
 
-def check_key_env(name: object, option: str, value: str) -> str:
+def check_key_env(name: object, option: Field, value: str) -> str:
     """``name`` when it is an environment variable's name (the variable that holds an API or
-    shared key: the key itself never goes on a command line); an InputError naming ``option``
+    shared key: the key itself never goes on a command line); an InputError naming the field ``option``
     (and its ``value``) otherwise."""
     if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
         raise InputError(option, value, f"key_env={name!r} is not a variable name",

@@ -154,10 +154,13 @@ def read_json_doc(path: Path, fmt: str, what: str, fix: str) -> dict:
     return doc
 
 
-def check_out_dir(path: Path, option: str = "--out") -> None:
+def check_out_dir(path: Path, option: object = None) -> None:
     """An InputError unless ``path`` is (or can be made) a writable folder: not a file, and
-    the folder or its nearest existing parent writable. Nothing is created here."""
-    from .errors import InputError
+    the folder or its nearest existing parent writable (errors naming ``option``, default the
+    field ``out``). Nothing is created here."""
+    from .errors import Field, InputError
+
+    option = option or Field("out")
 
     path = Path(path)
     if path.exists() and not path.is_dir():
@@ -216,12 +219,13 @@ class FolderLock:
     on leaving, the lock file goes, and so does a folder this lock made that is then empty (a
     refused run leaves nothing behind)."""
 
-    #: what a run that finds the folder taken should do (overridden per command)
-    BUSY_FIX = "wait for it to end, or use another --out folder"
 
     def __init__(self, path: Path, busy_fix: str = "") -> None:
         self.path = Path(path)
-        self.busy_fix = busy_fix or self.BUSY_FIX
+        from .errors import Field
+
+        #: what a run that finds the folder taken should do (given per command)
+        self.busy_fix = busy_fix or f"wait for it to end, or use another {Field('out')} folder"
         self._fd: int | None = None
         self._made = False
 

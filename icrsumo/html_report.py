@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .fsio import write_atomic
-from .metrics import PENALTIES
+from .scoring.penalties import PENALTIES
 from .types import EpisodeLog, EpisodeRecord, InstructionSet
 from .vocab import Family
 

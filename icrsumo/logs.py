@@ -11,7 +11,7 @@ Keys come in that fixed order, per-step values are columns, and floats are round
 termination_t to 1e-3 s, x/y/progress/route_dist/pos/route_length/route to 0.01 m, yaw to 1e-4 rad,
 speed to 1e-3 m/s, step_length to 1e-6 s), so the same episode always gives the same bytes and
 already-rounded logs round-trip exactly. Version 2 holds what the leaderboard's rules need to
-rescore the episode (:mod:`icrsumo.termination`, :mod:`icrsumo.metrics`): the route polyline,
+rescore the episode (:mod:`icrsumo.scoring`): the route polyline,
 the OutsideRouteLanesTest bits per step and a contact event per step of contact; version 1 logs
 cannot be rescored and are refused. Malformed input raises :class:`~icrsumo.errors.InputError`
 naming the key.
@@ -24,7 +24,8 @@ import math
 from pathlib import Path
 from typing import Any
 
-from icrsumo.errors import InputError, short
+from icrsumo.doccheck import DocChecker
+from icrsumo.errors import KIND_NAMES, Field, InputError, short
 from icrsumo.fsio import dumps_json, read_text, write_atomic
 from icrsumo.types import (
     TERMINATIONS,
@@ -134,9 +135,8 @@ def _guard_to_dict(g: GuardDecision, i: int) -> dict[str, Any]:
             "instruction_id": int(g.instruction_id), "verdict": str(g.verdict), "reason": g.reason}
 
 
-def _guard_from(rd: _Reader, raw: Any) -> tuple[GuardDecision, ...]:
-    if not isinstance(raw, list):
-        raise rd.fail("guard", f"expected a list, got {type(raw).__name__}")
+def _guard_from(rd: _LogChecker, raw: Any) -> tuple[GuardDecision, ...]:
+    rd.lst(raw, "guard")
     out = []
     for i, g in enumerate(raw):
         at = f"guard[{i}]"
@@ -153,9 +153,8 @@ def _guard_from(rd: _Reader, raw: Any) -> tuple[GuardDecision, ...]:
     return tuple(out)
 
 
-def _calls_from(rd: _Reader, raw: Any) -> tuple[ModelCall, ...]:
-    if not isinstance(raw, list):
-        raise rd.fail("model_calls", f"expected a list, got {type(raw).__name__}")
+def _calls_from(rd: _LogChecker, raw: Any) -> tuple[ModelCall, ...]:
+    rd.lst(raw, "model_calls")
     out = []
     for i, c in enumerate(raw):
         at = f"model_calls[{i}]"
@@ -168,7 +167,7 @@ def _calls_from(rd: _Reader, raw: Any) -> tuple[ModelCall, ...]:
             instruction_id=rd.integer(c["instruction_id"], f"{at}.instruction_id"),
             at=rd.string(c["at"], f"{at}.at"), key=rd.string(c["key"], f"{at}.key"),
             prompt=rd.string(c["prompt"], f"{at}.prompt"), answer=rd.string(c["answer"], f"{at}.answer"),
-            maneuver=rd.choice(c["maneuver"], Intent, f"{at}.maneuver", "maneuver"), valid=c["valid"],
+            maneuver=rd.member(c["maneuver"], f"{at}.maneuver", Intent, "maneuver"), valid=c["valid"],
             problem=rd.string(c["problem"], f"{at}.problem")))
     return tuple(out)
 
@@ -178,70 +177,54 @@ def _key(name: str) -> str:
     return name if len(name) <= 40 else short(name)
 
 
-class _Reader:
+class _LogChecker(DocChecker):
+    """The typed reads of :class:`~icrsumo.doccheck.DocChecker`, worded as episode logs' and
+    results' messages are (``k: expected an integer, got '1'``): a missing key named by its
+    path, no fix but for a missing key, strings of any length."""
+
+    max_string = None
+    choice_fix = "one of {}"
+
     def __init__(self, source: str) -> None:
-        self.source = source
+        super().__init__(source, "")
 
-    def fail(self, place: str, problem: str, fix: str = "") -> InputError:
-        return InputError(self.source, place, problem, fix)
+    def wrong_type(self, v: Any, place: str, kind: type) -> InputError:
+        got = short(v) if kind is int else type(v).__name__
+        return self.fail(place, f"expected {KIND_NAMES[kind]}, got {got}")
 
-    def get(self, d: dict, key: str, prefix: str = "") -> Any:
-        if key not in d:
-            raise self.fail(prefix + key, f"missing key {key!r}", "write episode logs with icrsumo.logs")
-        return d[key]
+    def bad_number(self, v: Any, place: str) -> InputError:
+        return self.fail(place, f"expected a finite number, got {short(v)}")
 
-    def string(self, v: Any, place: str) -> str:
-        if not isinstance(v, str):
-            raise self.fail(place, f"expected a string, got {type(v).__name__}")
-        return v
-
-    def choice(self, v: Any, enum: type, place: str, what: str):
-        """``v`` as a member of the string enum ``enum`` (InputError naming the values)."""
-        text = self.string(v, place)
-        try:
-            return enum(text)
-        except ValueError:
-            raise self.fail(place, f"unknown {what} {short(text)}", f"one of {', '.join(enum)}") from None
-
-    def integer(self, v: Any, place: str) -> int:
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise self.fail(place, f"expected an integer, got {short(v)}")
-        return v
-
-    def number(self, v: Any, place: str) -> float:
-        try:
-            ok = not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
-        except OverflowError:  # an integer beyond the float range
-            ok = False
-        if not ok:
-            raise self.fail(place, f"expected a finite number, got {short(v)}")
-        return float(v)
+    def missing(self, key: str, prefix: str) -> InputError:
+        return self.fail(f"{prefix}.{key}" if prefix else key, f"missing key {key!r}",
+                         "write episode logs with icrsumo.logs")
 
 
 def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
     """Build an :class:`EpisodeLog` from :func:`log_to_dict` output, checking every key.
     ``source`` (a file name) is used in error messages."""
-    rd = _Reader(source)
+    rd = _LogChecker(source)
     if not isinstance(d, dict):
         raise rd.fail("", f"an episode log must be a JSON object, got {type(d).__name__}")
     unknown = sorted(set(d) - set(_HEADER))
     if unknown:
         raise rd.fail(_key(unknown[0]), f"unknown key {short(unknown[0])}",
                       f"allowed keys: {', '.join(_HEADER)}")
-    version = rd.integer(rd.get(d, "version"), "version")
+    version = rd.integer(rd.key(d, "version"), "version")
     if version != LOG_VERSION:
         fix = (f"expected {LOG_VERSION}; logs of version 1 predate the leaderboard's scoring rules "
-               "and cannot be rescored: run the episodes again with this icrsumo into a new --out folder")
+               f"and cannot be rescored: run the episodes again with this icrsumo into a new "
+               f"{Field('out')} folder")
         raise rd.fail("version", f"unsupported episode log version {short(version)}", fix)
-    termination = rd.choice(rd.get(d, "termination"), Termination, "termination", "termination")
-    step_length = rd.number(rd.get(d, "step_length"), "step_length")
+    termination = rd.member(rd.key(d, "termination"), "termination", Termination, "termination")
+    step_length = rd.number(rd.key(d, "step_length"), "step_length")
     if step_length <= 0:
         raise rd.fail("step_length", f"step_length must be > 0, got {step_length}")
-    route_length = rd.number(rd.get(d, "route_length"), "route_length")
+    route_length = rd.number(rd.key(d, "route_length"), "route_length")
     if route_length < 0:
         raise rd.fail("route_length", f"route_length must be >= 0, got {route_length}")
 
-    steps = rd.get(d, "steps")
+    steps = rd.key(d, "steps")
     if not isinstance(steps, dict):
         raise rd.fail("steps", "expected an object of per-step columns")
     extra = sorted(set(steps) - set(STEP_COLUMNS))
@@ -250,9 +233,7 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
                       f"allowed columns: {', '.join(STEP_COLUMNS)}")
     cols: dict[str, tuple] = {}
     for col, dec in STEP_COLUMNS.items():
-        raw = rd.get(steps, col, "steps.")
-        if not isinstance(raw, list):
-            raise rd.fail(f"steps.{col}", f"expected a list, got {type(raw).__name__}")
+        raw = rd.lst(rd.key(steps, col, "steps"), f"steps.{col}")
         conv = rd.integer if dec is None else rd.number
         cols[col] = tuple(conv(v, f"steps.{col}[{i}]") for i, v in enumerate(raw))
     n = len(cols["t"])
@@ -270,7 +251,7 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
     for i, v in enumerate(cols["outside"]):
         if not 0 <= v <= _OUTSIDE_MAX:
             raise rd.fail(f"steps.outside[{i}]", f"expected 0 to {_OUTSIDE_MAX}, got {short(v)}")
-    raw_route = rd.get(d, "route")
+    raw_route = rd.key(d, "route")
     if not isinstance(raw_route, list) or (n and not raw_route):
         raise rd.fail("route", "expected a non-empty list of [x, y] points")
     route = []
@@ -280,14 +261,12 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
             raise rd.fail(f"route[{i}]", f"expected [x, y] or [x, y, heading] like route[0], got {short(p)}")
         route.append(tuple(rd.number(v, f"route[{i}][{j}]") for j, v in enumerate(p)))
 
-    raw_events = rd.get(d, "events")
-    if not isinstance(raw_events, list):
-        raise rd.fail("events", f"expected a list, got {type(raw_events).__name__}")
+    raw_events = rd.lst(rd.key(d, "events"), "events")
     events = []
     for i, ev in enumerate(raw_events):
         if not isinstance(ev, list) or len(ev) != len(EVENT_FIELDS):
             raise rd.fail(f"events[{i}]", f"expected a list [{', '.join(EVENT_FIELDS)}], got {short(ev)}")
-        kind = rd.choice(ev[0], EventKind, f"events[{i}].kind", "event kind")
+        kind = rd.member(ev[0], f"events[{i}].kind", EventKind, "event kind")
         events.append(Event(
             kind=kind,
             t=rd.number(ev[1], f"events[{i}].t"),
@@ -298,11 +277,11 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
         ))
 
     return EpisodeLog(
-        route_id=rd.string(rd.get(d, "route_id"), "route_id"),
-        agent=rd.string(rd.get(d, "agent"), "agent"),
-        family=rd.choice(rd.get(d, "family"), Family, "family", "family"),
-        k=rd.integer(rd.get(d, "k"), "k"),
-        seed=rd.integer(rd.get(d, "seed"), "seed"),
+        route_id=rd.string(rd.key(d, "route_id"), "route_id"),
+        agent=rd.string(rd.key(d, "agent"), "agent"),
+        family=rd.member(rd.key(d, "family"), "family", Family, "family"),
+        k=rd.integer(rd.key(d, "k"), "k"),
+        seed=rd.integer(rd.key(d, "seed"), "seed"),
         step_length=step_length,
         route_length=route_length,
         t=cols["t"],
@@ -316,7 +295,7 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
         route_dist=cols["route_dist"],
         events=tuple(events),
         termination=termination,
-        termination_t=rd.number(rd.get(d, "termination_t"), "termination_t"),
+        termination_t=rd.number(rd.key(d, "termination_t"), "termination_t"),
         message=rd.string(d.get("message", ""), "message"),
         route=tuple(route),
         traffic_speed=cols["traffic_speed"],
@@ -382,14 +361,14 @@ def result_to_dict(result: EpisodeResult) -> dict[str, Any]:
 
 def result_from_dict(d: Any, source: str = "<episode result>") -> EpisodeResult:
     """Inverse of :func:`result_to_dict`; malformed input raises InputError."""
-    rd = _Reader(source)
+    rd = _LogChecker(source)
     if not isinstance(d, dict):
         raise rd.fail("", f"an episode result must be a JSON object, got {type(d).__name__}")
-    termination = rd.choice(rd.get(d, "termination"), Termination, "termination", "termination")
-    cls = rd.string(rd.get(d, "termination_class"), "termination_class")
+    termination = rd.member(rd.key(d, "termination"), "termination", Termination, "termination")
+    cls = rd.string(rd.key(d, "termination_class"), "termination_class")
     if cls != TERMINATIONS[termination].value:
         raise rd.fail("termination_class", f"{short(cls)} does not match termination {termination!r}")
-    raw = rd.get(d, "infractions")
+    raw = rd.key(d, "infractions")
     if not isinstance(raw, list):
         raise rd.fail("infractions", "expected a list")
     infractions = []
@@ -397,24 +376,24 @@ def result_from_dict(d: Any, source: str = "<episode result>") -> EpisodeResult:
         if not isinstance(it, list) or len(it) != 5:
             raise rd.fail(f"infractions[{i}]", f"expected [kind, factor, t, pos, other], got {short(it)}")
         infractions.append(Infraction(
-            kind=rd.choice(it[0], EventKind, f"infractions[{i}].kind", "event kind"),
+            kind=rd.member(it[0], f"infractions[{i}].kind", EventKind, "event kind"),
             factor=rd.number(it[1], f"infractions[{i}].factor"),
             t=rd.number(it[2], f"infractions[{i}].t"),
             pos=rd.number(it[3], f"infractions[{i}].pos"),
             other=rd.string(it[4], f"infractions[{i}].other"),
         ))
     return EpisodeResult(
-        route_id=rd.string(rd.get(d, "route_id"), "route_id"),
-        agent=rd.string(rd.get(d, "agent"), "agent"),
-        family=rd.choice(rd.get(d, "family"), Family, "family", "family"),
-        k=rd.integer(rd.get(d, "k"), "k"),
-        rc=rd.number(rd.get(d, "rc"), "rc"),
-        is_=rd.number(rd.get(d, "is"), "is"),
-        ds=rd.number(rd.get(d, "ds"), "ds"),
+        route_id=rd.string(rd.key(d, "route_id"), "route_id"),
+        agent=rd.string(rd.key(d, "agent"), "agent"),
+        family=rd.member(rd.key(d, "family"), "family", Family, "family"),
+        k=rd.integer(rd.key(d, "k"), "k"),
+        rc=rd.number(rd.key(d, "rc"), "rc"),
+        is_=rd.number(rd.key(d, "is"), "is"),
+        ds=rd.number(rd.key(d, "ds"), "ds"),
         termination=termination,
         termination_class=TERMINATIONS[termination],
         infractions=tuple(infractions),
-        outside_lanes_pct=rd.number(rd.get(d, "outside_lanes_pct"), "outside_lanes_pct"),
-        duration=rd.number(rd.get(d, "duration"), "duration"),
+        outside_lanes_pct=rd.number(rd.key(d, "outside_lanes_pct"), "outside_lanes_pct"),
+        duration=rd.number(rd.key(d, "duration"), "duration"),
         outside_m=rd.number(d.get("outside_m", 0.0), "outside_m"),
     )

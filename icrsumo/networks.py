@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from .errors import Field, InputError
 from .fsio import sha256_file, strip_header_comments, write_atomic
 from .resources import sumo_binary, sumo_home
 from .routes import check_xml_file
@@ -71,7 +71,7 @@ class RoadNet:
         import sumolib  # sumolib's net reader; pure Python
 
         self.path = Path(path)
-        check_xml_file(self.path, "network file", "check the path or --net")
+        check_xml_file(self.path, "network file", f"check the path or {Field('net')}")
         try:
             net = sumolib.net.readNet(str(self.path), withInternal=True)
             self._init(net)
@@ -376,7 +376,7 @@ def _load_cached(path: str, mtime_ns: int, size: int) -> RoadNet:
 
 def load_net(path: Path) -> RoadNet:
     """Load (and cache per process) the network at ``path``."""
-    check_xml_file(Path(path), "network file", "check the path or --net")
+    check_xml_file(Path(path), "network file", f"check the path or {Field('net')}")
     p = Path(path).resolve()
     st = p.stat()
     return _load_cached(str(p), st.st_mtime_ns, st.st_size)
@@ -388,7 +388,7 @@ def convert_xodr(xodr: Path, cache_dir: Path) -> Path:
     The cache key is the SHA-256 of the file's bytes and of the netconvert options.
     """
     xodr = Path(xodr)
-    check_xml_file(xodr, "OpenDRIVE file", "check the --xodr path")
+    check_xml_file(xodr, "OpenDRIVE file", f"check the {Field('xodr')} path")
     key = hashlib.sha256(
         bytes.fromhex(sha256_file(xodr)) + " ".join(XODR_OPTIONS).encode()
     ).hexdigest()[:16]

@@ -1,12 +1,12 @@
-"""Reports of an evaluation: ICR-Drive tables (Markdown, CSV, LaTeX), figures, Leaderboard 1.0
-checkpoint files. The only module that uses matplotlib (imported lazily, Agg, no pyplot)."""
+"""Reports of an evaluation: ICR-Drive tables (Markdown, CSV, LaTeX), figures, the leaderboard
+results files (as the run's scoring writes them, :mod:`icrsumo.scoring`). The only module that
+uses matplotlib (imported lazily, Agg, no pyplot)."""
 
 from __future__ import annotations
 
 import csv
 import functools
 import io
-import math
 import re
 import sys
 import textwrap
@@ -19,8 +19,9 @@ import numpy as np
 from .aggregate import BASELINE, EPISODE_COLUMNS, episode_table
 from .errors import visible
 from .fsio import MAX_FILE_NAME, bounded_name, dumps_json, write_atomic
+from .scoring import DEFAULT_SCORING, get_scoring
 from .types import EpisodeLog, EpisodeRecord
-from .vocab import EpisodeStatus, EventKind, Family, Termination
+from .vocab import EventKind, Family
 
 # --------------------------------------------------------------------------- tables
 _HEADER = ("Agent", "Family", "DS", "RC", "IS", "ΔDS [95% CI]", "ΔRC [95% CI]", "ΔIS", "worst ΔDS",
@@ -539,241 +540,6 @@ def paired_rollout(net, baseline_log: EpisodeLog, variant_logs: list[tuple[str, 
     _save(fig, path)
 
 
-# --------------------------------------------------------------------------- leaderboard checkpoint
-#: Leaderboard 1.0 infraction keys, in the order of ``RouteRecord.infractions``.
-LB_INFRACTIONS = ("collisions_pedestrian", "collisions_vehicle", "collisions_layout", "red_light",
-                  "stop_infraction", "outside_route_lanes", "route_dev", "route_timeout", "vehicle_blocked")
-_LB_KIND = {
-    EventKind.COLLISION_PEDESTRIAN: ("collisions_pedestrian", "Agent collided against a pedestrian"),
-    EventKind.COLLISION_VEHICLE: ("collisions_vehicle", "Agent collided against a vehicle"),
-    EventKind.COLLISION_STATIC: ("collisions_layout", "Agent collided against the static layout"),
-    EventKind.RED_LIGHT: ("red_light", "Agent ran a red light"),
-    EventKind.STOP_SIGN: ("stop_infraction", "Agent ran a stop sign"),
-}
-_LB_TERMINATION = {  # termination -> (status, infraction key, message)
-    Termination.COMPLETED: ("Completed", None, ""),
-    Termination.ROUTE_DEVIATION: ("Failed - Agent deviated from the route", "route_dev",
-                                  "Agent deviated from the route"),
-    Termination.ROUTE_TIMEOUT: ("Failed - Agent timed out", "route_timeout", "Route timeout."),
-    Termination.AGENT_BLOCKED: ("Failed - Agent got blocked", "vehicle_blocked", "Agent got blocked"),
-    Termination.STUCK: ("Failed - Agent got blocked", "vehicle_blocked",
-                        "Agent got stuck (SUMO teleported the ego)"),
-    Termination.SIM_ERROR: ("Failed - Simulation crashed", None, ""),
-}
-_LB_LABELS = ["Avg. driving score", "Avg. route completion", "Avg. infraction penalty",
-              "Collisions with pedestrians", "Collisions with vehicles", "Collisions with layout",
-              "Red lights infractions", "Stop sign infractions", "Off-road infractions", "Route deviations",
-              "Route timeouts", "Agent blocked"]
-
-
-def _lb_status(r: EpisodeRecord) -> tuple[str, str | None, str]:
-    """A record's leaderboard status, the infraction key its termination adds and that entry."""
-    if r.status == EpisodeStatus.CRASHED:
-        return ("Failed - Agent crashed" if "agent" in r.message.lower() else "Failed - Simulation crashed",
-                None, "")
-    return _LB_TERMINATION.get(r.termination, (f"Failed - {r.termination}", None, ""))
-
-
-def _lb_record(r: EpisodeRecord, index: int) -> dict:
-    infr: dict[str, list[str]] = {k: [] for k in LB_INFRACTIONS}
-    status, key, msg = _lb_status(r)
-    if r.status != EpisodeStatus.CRASHED:
-        for kind, factor in r.infractions:
-            if kind == EventKind.OUTSIDE_ROUTE_LANES:
-                infr["outside_route_lanes"].append(
-                    f"Agent went outside its route lanes for about {100.0 * (1.0 - factor):.2f}% of the "
-                    "completed route")
-                continue
-            lb_key, text = _LB_KIND.get(kind, ("collisions_layout", f"Agent infraction {kind}"))
-            infr[lb_key].append(f"{text} (penalty {factor:.2f})")
-        if key is not None:
-            infr[key].append(msg)
-    return {
-        "route_id": f"RouteScenario_{r.route_id}_{r.family}_{r.k}",
-        "index": index,
-        "status": status,
-        "infractions": infr,
-        "scores": {"score_route": r.rc, "score_penalty": r.is_, "score_composed": r.ds},
-        "meta": {"route_length": r.length, "duration_game": r.duration, "duration_system": -1},
-    }
-
-
-def leaderboard_checkpoint(records: Iterable[EpisodeRecord], agent: str, family: str) -> dict:
-    """The episodes of one agent and family as a CARLA Leaderboard 1.0 checkpoint (``result.json``).
-
-    Reproduces ``leaderboard/utils/statistics_manager.py`` (branch ``leaderboard-1.0``,
-    ``compute_global_statistics`` and ``save_global_record``): records sorted by (route_id, k,
-    seed); the global scores are means over *every* record, crashed ones included (their scores
-    are 0), with the sample standard deviation; each infraction rate is the sum over records of
-    the record's count / max(RC / 100 x route km, 0.001); every record that is not 'Completed' is
-    in ``meta.exceptions``. ``entry_status``: 'Crashed' (not eligible) when an episode's simulation
-    crashed, else 'Finished with agent errors' when any record's status names the agent (as
-    the leaderboard's substring test does: deviations, timeouts and blocks included), else
-    'Finished'. The global ``meta`` also holds ``total_length`` (m) and ``duration_game`` (s),
-    summed, and ``duration_system`` -1 (icrsumo does not time episodes by wall clock; -1 is the
-    leaderboard's value for a duration it was not given)."""
-    mine = sorted((r for r in records if r.agent == agent and r.family == family),
-                  key=lambda r: (r.route_id, r.k, r.seed))
-    recs = [_lb_record(r, i) for i, r in enumerate(mine)]
-    n = len(recs)
-    infr = {k: 0.0 for k in LB_INFRACTIONS}
-    for r, rec in zip(mine, recs):
-        km = max(r.rc / 100.0 * r.length / 1000.0, 0.001)
-        for k in LB_INFRACTIONS:
-            infr[k] += len(rec["infractions"][k]) / km
-    infr = {k: round(v, 6) for k, v in infr.items()}
-    scores = {"score_route": 0.0, "score_penalty": 0.0, "score_composed": 0.0}
-    std: dict[str, Any] = {k: "NaN" for k in scores}
-    if n:
-        cols = {"score_route": [r.rc for r in mine], "score_penalty": [r.is_ for r in mine],
-                "score_composed": [r.ds for r in mine]}
-        scores = {k: round(float(np.mean(v)), 6) for k, v in cols.items()}
-        if n > 1:
-            std = {k: round(float(np.std(v, ddof=1)), 6) for k, v in cols.items()}
-    exceptions = [[rec["route_id"], rec["index"], rec["status"]] for rec in recs
-                  if rec["status"] != "Completed"]
-    global_record = {
-        "route_id": -1,
-        "index": -1,
-        "status": "Failed" if exceptions else "Completed",
-        "infractions": infr,
-        "scores": scores,
-        "meta": {"exceptions": exceptions, "total_length": round(sum(r.length for r in mine), 2),
-                 "duration_game": round(sum(r.duration for r in mine), 3), "duration_system": -1},
-        "scores_std_dev": std,
-    }
-    values = [f"{scores['score_composed']:.3f}", f"{scores['score_route']:.3f}",
-              f"{scores['score_penalty']:.3f}"] + [
-        f"{infr[k]:.3f}" for k in ("collisions_pedestrian", "collisions_vehicle", "collisions_layout",
-                                   "red_light", "stop_infraction", "outside_route_lanes", "route_dev",
-                                   "route_timeout", "vehicle_blocked")]
-    statuses = [rec["status"] for rec in recs]
-    if "Failed - Simulation crashed" in statuses:
-        entry, eligible = "Crashed", False
-    elif any("Agent" in st for st in statuses):
-        entry, eligible = "Finished with agent errors", True
-    else:
-        entry, eligible = "Finished", True
-    return {
-        "_checkpoint": {"global_record": global_record, "progress": [n, n], "records": recs},
-        "entry_status": entry,
-        "eligible": eligible,
-        "sensors": [],
-        "values": values,
-        "labels": list(_LB_LABELS),
-    }
-
-
-#: Leaderboard 2.0's infraction keys (statistics_manager.py's PENALTY_NAME_DICT and route_timeout)
-LB2_INFRACTIONS = ("collisions_layout", "collisions_pedestrian", "collisions_vehicle", "red_light",
-                   "stop_infraction", "outside_route_lanes", "min_speed_infractions",
-                   "yield_emergency_vehicle_infractions", "scenario_timeouts", "route_dev", "vehicle_blocked",
-                   "route_timeout")
-_LB2_VALUE_KEYS = ("collisions_pedestrian", "collisions_vehicle", "collisions_layout", "red_light",
-                   "stop_infraction", "outside_route_lanes", "route_dev", "route_timeout",
-                   "vehicle_blocked", "yield_emergency_vehicle_infractions", "scenario_timeouts",
-                   "min_speed_infractions")
-_LB2_LABELS = [*_LB_LABELS, "Yield emergency vehicles infractions", "Scenario timeouts",
-               "Min speed infractions"]
-
-
-def _lb2_record(r: EpisodeRecord, index: int) -> dict:
-    infr: dict[str, list[str]] = {k: [] for k in LB2_INFRACTIONS}
-    status, key, msg = _lb_status(r)
-    if r.status != EpisodeStatus.CRASHED:
-        for kind, factor in r.infractions:
-            if kind == EventKind.OUTSIDE_ROUTE_LANES:
-                infr["outside_route_lanes"].append(
-                    f"Agent went outside its route lanes for about {r.outside_m:.3f} meters "
-                    f"({100.0 * (1.0 - factor):.2f}% of the completed route)")
-            elif kind == EventKind.MIN_SPEED:
-                value = 100.0 * (1.0 - (1.0 - factor) / 0.3)
-                infr["min_speed_infractions"].append(
-                    f"Average speed is {value:.2f}% of the surrounding traffic's one")
-            else:
-                lb_key, text = _LB_KIND.get(kind, ("collisions_layout", f"Agent infraction {kind}"))
-                infr[lb_key].append(f"{text} (penalty {factor:.2f})")
-        if key is not None:
-            infr[key].append(msg)
-        if status == "Completed" and not any(infr.values()):
-            status = "Perfect"
-    return {
-        "index": index,
-        "route_id": f"RouteScenario_{r.route_id}_{r.family}_{r.k}",
-        "status": status,
-        "num_infractions": sum(len(v) for v in infr.values()),
-        "infractions": infr,
-        "scores": {"score_route": round(r.rc, 6), "score_penalty": round(r.is_, 6),
-                   "score_composed": round(max(r.ds, 0.0), 6)},
-        "meta": {"route_length": round(r.length, 3), "duration_game": round(r.duration, 3),
-                 "duration_system": -1},
-    }
-
-
-def leaderboard_checkpoint_lb2(records: Iterable[EpisodeRecord], agent: str, family: str) -> dict:
-    """The episodes of one agent and family as a CARLA Leaderboard 2.0 results file.
-
-    Reproduces 2.0's ``statistics_manager.py`` (``compute_global_statistics``): statuses
-    'Perfect' (completed without any infraction), 'Completed' and 'Failed - ...'; the means
-    over every record rounded to 6 decimals and the sample standard deviations (around the
-    rounded means) to 3; infractions pooled over the routes: count / max(sum of RC / 100 x
-    route km, 0.001), except ``outside_route_lanes``, which is the km of route advance made off
-    the lanes; the global status drops Perfect -> Completed -> Failed; ``entry_status``
-    'Crashed' (not eligible) when a simulation crashed, else 'Finished'; ``duration_system`` is
-    -1 (not timed by wall clock)."""
-    mine = sorted((r for r in records if r.agent == agent and r.family == family),
-                  key=lambda r: (r.route_id, r.k, r.seed))
-    recs = [_lb2_record(r, i) for i, r in enumerate(mine)]
-    n = len(recs)
-    keys = ("score_composed", "score_route", "score_penalty")
-    means = {k: 0.0 for k in keys}
-    for rec in recs:
-        for k in keys:
-            means[k] += rec["scores"][k] / n
-    means = {k: round(v, 6) for k, v in means.items()}
-    std = {k: 0.0 for k in keys}
-    if n > 1:
-        std = {k: round(math.sqrt(sum((rec["scores"][k] - means[k]) ** 2 for rec in recs) / (n - 1)), 3)
-               for k in keys}
-    km = max(sum(r.length / 1000.0 * r.rc / 100.0 for r in mine), 0.001)
-    infr = {}
-    for k in LB2_INFRACTIONS:
-        if k == "outside_route_lanes":
-            infr[k] = round(sum(r.outside_m for r in mine if any(kind == EventKind.OUTSIDE_ROUTE_LANES
-                                                                 for kind, _ in r.infractions)) / 1000.0, 3)
-        else:
-            infr[k] = round(sum(len(rec["infractions"][k]) for rec in recs) / km, 3)
-    status, exceptions = "Perfect", []
-    for rec in recs:
-        if "Failed" in rec["status"]:
-            exceptions.append([rec["route_id"], rec["index"], rec["status"]])
-            status = "Failed"
-        elif status == "Perfect" and rec["status"] != "Perfect":
-            status = rec["status"]
-    global_record = {
-        "index": -1, "route_id": -1, "status": status, "infractions": infr,
-        "scores_mean": means, "scores_std_dev": std,
-        "meta": {"total_length": round(sum(r.length for r in mine), 3),
-                 "duration_game": round(sum(r.duration for r in mine), 3), "duration_system": -1,
-                 "exceptions": exceptions},
-    }
-    values = [str(means["score_composed"]), str(means["score_route"]), str(means["score_penalty"])] + [
-        str(infr[k]) for k in _LB2_VALUE_KEYS]
-    crashed = any("Simulation crashed" in rec["status"] for rec in recs)
-    return {
-        "_checkpoint": {"global_record": global_record, "progress": [n, n], "records": recs},
-        "entry_status": "Crashed" if crashed else "Finished",
-        "eligible": not crashed,
-        "sensors": [],
-        "values": values,
-        "labels": list(_LB2_LABELS),
-    }
-
-
-#: scoring name -> its leaderboard results file
-LEADERBOARD_FILES = {"lb1": leaderboard_checkpoint, "lb2": leaderboard_checkpoint_lb2}
-
-
 # --------------------------------------------------------------------------- all of it
 def _file_name(s: str) -> str:
     """The part of a file name that stands for ``s`` (an agent name, a family): letters,
@@ -865,7 +631,7 @@ def write_report(summary: dict, records: Sequence[EpisodeRecord], out_dir: Path,
     figure_or_note(rd_to_plane, summary, out / "figures" / "rd_to.png")
     figure_or_note(delta_bars, summary, out / "figures" / "delta_bars.png")
     fams = [BASELINE] + list(summary.get("families") or [])
-    checkpoint = LEADERBOARD_FILES[summary.get("scoring", "lb1")]
+    checkpoint = get_scoring(summary.get("scoring", DEFAULT_SCORING)).leaderboard_file
     for agent in summary["agents"]:
         for fam in fams:
             cp = checkpoint(records, agent, fam)

@@ -15,7 +15,7 @@ from xml.etree.ElementTree import Element, ParseError
 from defusedxml import DefusedXmlException
 from defusedxml.ElementTree import parse as safe_parse
 
-from .errors import InputError, short
+from .errors import Field, InputError, short
 from .fsio import BOMS, unreadable
 from .types import RouteSpec, Waypoint
 
@@ -244,7 +244,7 @@ def looks_like_path(name: str) -> bool:
     return any(c in name for c in "/\\") or name.startswith((".", "~")) or bool(Path(name).suffix)
 
 
-def suite_file(suite: str, field: str = "suite", folders: bool = False) -> Path | None:
+def suite_file(suite: str, field: object = Field("suite"), folders: bool = False) -> Path | None:
     """The route XML file of ``suite``: a bundled suite's name (``tiny``) or a route file's
     path. With ``folders``, a convert-routes folder (one holding ``index.json``) is accepted
     too, and gives None (its routes are converted already). Otherwise an InputError: a
@@ -289,7 +289,7 @@ def _did_you_mean(name: str, names: list[str], cutoff: float) -> str:
     return f"did you mean {' or '.join([', '.join(close[:-1]), close[-1]] if len(close) > 1 else close)}? "
 
 
-def check_route_selection(selected: Iterable[str], ids: Iterable[str], field: str, suite: str) -> None:
+def check_route_selection(selected: Iterable[str], ids: Iterable[str], field: Field, suite: str) -> None:
     """InputError for the first of the ``selected`` route ids that is not among ``ids`` (the
     route file's, :func:`route_ids`), naming its closest ids and the suite's first ids."""
     have = list(ids)

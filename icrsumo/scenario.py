@@ -4,6 +4,8 @@
 the network, the SUMO config and the files the config names exist and are safe XML
 (:func:`icrsumo.routes.check_xml_file`), so that a damaged or hand-edited scenario folder is one
 :class:`~icrsumo.errors.InputError` line naming the file and the key, never a traceback later.
+What it read is a :class:`Scenario` of frozen records (the ego, its route with the junctions it
+crosses, the traffic): the package reads those, never the manifest's keys.
 """
 
 from __future__ import annotations
@@ -13,9 +15,11 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any
 
-from .errors import InputError, expect, short
+from .doccheck import DocChecker
+from .errors import InputError, short
 from .fsio import read_json_doc
 from .routes import check_xml_file, parse_xml_file
+from .types import EgoRoute, JunctionPass, LaneChange, LanePos
 
 SCENARIO_FORMAT = "icrsumo-scenario/1"
 #: simulation step length (s) written into the .sumocfg: 20 Hz, as the CARLA Leaderboard
@@ -29,90 +33,42 @@ DIRECTIONS = ("s", "l", "r", "t", "L", "R")
 _TRAFFIC_LEVELS = ("none", "light", "normal", "dense")
 
 
-class DocChecker:
-    """Typed reads of a parsed JSON document ``file``; each problem is an InputError naming the
-    file and the key path (``ego.start.pos``, ``sets[2].instructions[0].intent``) with ``fix``."""
+@dataclass(frozen=True)
+class EgoVehicle:
+    """The ego vehicle: the ids of its SUMO vType and route (``ego.rou.xml``), the simulation
+    time at which it enters (``depart``, s: background traffic warms up before) and its size (m)."""
 
-    def __init__(self, file: object, fix: str) -> None:
-        self.file, self.fix = file, fix
+    vtype: str
+    sumo_route: str
+    depart: float
+    length: float
+    width: float
 
-    def fail(self, place: str, problem: str, fix: str | None = None) -> InputError:
-        return InputError(self.file, place, problem, self.fix if fix is None else fix)
 
-    @staticmethod
-    def _name(place: str) -> str:
-        return place.rsplit(".", 1)[-1] or "value"
+@dataclass(frozen=True)
+class Traffic:
+    """The background traffic: the simulation runs until ``end`` (s); ``level`` (none, light,
+    normal, dense); the vehicles and pedestrians its route files hold and the fleet cap
+    (``max_vehicles``, -1: no background vehicles). Scenarios written before icrsumo recorded
+    them have "" and None."""
 
-    def key(self, d: dict, key: str, prefix: str = "") -> Any:
-        """``d[key]`` (``prefix`` is the place of ``d``); a missing key is an error."""
-        if key not in d:
-            raise self.fail(prefix or "top level", f"missing key {key!r}")
-        return d[key]
-
-    def obj(self, v: Any, place: str) -> dict:
-        return expect(v, dict, self.file, place, self._name(place), self.fix)
-
-    def lst(self, v: Any, place: str, min_len: int = 0) -> list:
-        expect(v, list, self.file, place, self._name(place), self.fix)
-        if len(v) < min_len:
-            raise self.fail(place, f"has {len(v)} entries, needs at least {min_len}")
-        return v
-
-    def string(self, v: Any, place: str, nonempty: bool = False, limit: int = 10_000) -> str:
-        expect(v, str, self.file, place, self._name(place), self.fix)
-        if nonempty and not v.strip():
-            raise self.fail(place, f"{self._name(place)} must not be empty")
-        if len(v) > limit:
-            raise self.fail(place, f"{self._name(place)} is {len(v)} characters long (at most {limit})")
-        return v
-
-    def boolean(self, v: Any, place: str) -> bool:
-        return expect(v, bool, self.file, place, self._name(place), self.fix)
-
-    def integer(self, v: Any, place: str, lo: int | None = None, hi: int | None = None) -> int:
-        expect(v, int, self.file, place, self._name(place), self.fix)
-        if (lo is not None and v < lo) or (hi is not None and v > hi):
-            rng = f"{lo if lo is not None else '-inf'} .. {hi if hi is not None else 'inf'}"
-            raise self.fail(place, f"{self._name(place)} = {short(v)} is out of range ({rng})")
-        return v
-
-    def number(self, v: Any, place: str, lo: float | None = None, hi: float | None = None,
-               lo_open: bool = False) -> float:
-        """A finite JSON number (an integer is fine) within [lo, hi] (``lo_open``: > lo)."""
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            got = "null" if v is None else type(v).__name__
-            raise self.fail(place, f"{self._name(place)} must be a number, not {got}")
-        try:
-            f = float(v)
-        except OverflowError:
-            f = math.inf
-        if not math.isfinite(f):
-            raise self.fail(place, f"{self._name(place)} must be a finite number, not {short(v)}")
-        below = lo is not None and (f <= lo if lo_open else f < lo)
-        if below or (hi is not None and f > hi):
-            left = "(" if lo_open else "["
-            raise self.fail(place, f"{self._name(place)} = {short(v)} is out of range "
-                            f"({left}{lo if lo is not None else '-inf'}, {hi if hi is not None else 'inf'}])")
-        return f
-
-    def choice(self, v: Any, place: str, values, what: str) -> str:
-        """``v`` as one of the strings ``values`` (an enum class or a sequence)."""
-        text = expect(v, str, self.file, place, self._name(place), self.fix)
-        allowed = [str(x) for x in values]
-        if text not in allowed:
-            raise self.fail(place, f"unknown {what} {short(text)}", f"use one of {', '.join(allowed)}")
-        return text
+    end: float
+    level: str = ""
+    n_vehicles: int | None = None
+    n_pedestrians: int | None = None
+    max_vehicles: int | None = None
 
 
 @dataclass(frozen=True)
 class Scenario:
     """One runnable scenario. Paths are absolute; lengths in m, times in s, angles in rad.
 
-    ``ego_edges``: the ego's normal edges in order; ``polyline``: (N, 2) route centre line;
-    ``headings``: (N,) lane direction at each polyline vertex (rad; empty in scenarios written
-    before icrsumo recorded it);
-    ``start``: (x, y, heading) of the ego at the route start; ``ego_depart``: simulation time
-    at which the ego enters (background traffic warms up before).
+    ``ego``: the ego vehicle; ``route``: its route (edges, lanes, start and end, centre line,
+    the junctions it crosses and the lane changes it needs; ``route.headings`` is empty in
+    scenarios written before icrsumo recorded it); ``traffic``: the background traffic;
+    ``step_length``: the simulation step (s); ``source_hash``: the hash of the inputs it was
+    converted from ("" when absent). ``manifest`` is the raw ``scenario.json``, for copying it
+    whole; read the records instead of its keys.
     """
 
     route_id: str
@@ -121,17 +77,54 @@ class Scenario:
     net: Path
     sumocfg: Path
     seed: int
-    ego_edges: tuple[str, ...]
-    start_lane: str
-    start_pos: float
-    start: tuple[float, float, float]
-    polyline: tuple[tuple[float, float], ...]
-    length: float
-    ego_depart: float
-    end_time: float
+    step_length: float
+    ego: EgoVehicle
+    route: EgoRoute
+    traffic: Traffic
     weather: dict
+    source_hash: str
     manifest: dict
-    headings: tuple[float, ...] = ()
+
+    @property
+    def ego_edges(self) -> tuple[str, ...]:
+        """The ego's normal edges in order."""
+        return self.route.edges
+
+    @property
+    def start_lane(self) -> str:
+        return self.route.start.lane
+
+    @property
+    def start_pos(self) -> float:
+        return self.route.start.pos
+
+    @property
+    def start(self) -> tuple[float, float, float]:
+        """(x, y, heading) of the ego's front at the route start."""
+        st = self.route.start
+        return st.x, st.y, st.heading
+
+    @property
+    def polyline(self) -> tuple[tuple[float, float], ...]:
+        """(N, 2) route centre line."""
+        return self.route.polyline
+
+    @property
+    def headings(self) -> tuple[float, ...]:
+        """(N,) lane direction at each polyline vertex (empty in older scenarios)."""
+        return self.route.headings
+
+    @property
+    def length(self) -> float:
+        return self.route.length
+
+    @property
+    def ego_depart(self) -> float:
+        return self.ego.depart
+
+    @property
+    def end_time(self) -> float:
+        return self.traffic.end
 
 
 def _rel_file(c: DocChecker, base: Path, value: Any, place: str, what: str) -> Path:
@@ -146,7 +139,7 @@ def _rel_file(c: DocChecker, base: Path, value: Any, place: str, what: str) -> P
     return path
 
 
-def _lane_pos(c: DocChecker, v: Any, place: str) -> dict:
+def _lane_pos(c: DocChecker, v: Any, place: str) -> LanePos:
     d = c.obj(v, place)
     extra = sorted(set(d) - {"lane", "pos", "x", "y", "heading"})
     if extra:
@@ -155,86 +148,126 @@ def _lane_pos(c: DocChecker, v: Any, place: str) -> dict:
     edge, _, index = lane.rpartition("_")
     if not edge or not index.isdigit():
         raise c.fail(f"{place}.lane", f"lane {short(lane)} is not a SUMO lane id (<edge>_<index>)")
-    c.number(c.key(d, "pos", place), f"{place}.pos", lo=0.0)
-    for k in ("x", "y", "heading"):
-        c.number(c.key(d, k, place), f"{place}.{k}")
-    return d
+    pos = c.number(c.key(d, "pos", place), f"{place}.pos", lo=0.0)
+    x, y, heading = (c.number(c.key(d, k, place), f"{place}.{k}") for k in ("x", "y", "heading"))
+    return LanePos(lane, pos, x, y, heading)
 
 
-def check_manifest(m: dict, c: DocChecker) -> None:
-    """Every key of a scenario manifest that the package reads, with its type and range."""
-    c.string(c.key(m, "route_id"), "route_id", nonempty=True, limit=200)
-    c.string(c.key(m, "town"), "town", limit=200)
-    c.integer(c.key(m, "seed"), "seed", 0, 2**31 - 1)
-    if "step_length" in m:
-        c.number(m["step_length"], "step_length", 0.0, 1.0, lo_open=True)
-    weather = c.obj(c.key(m, "weather"), "weather")
-    for k, v in weather.items():
-        c.string(v, f"weather.{k}", limit=1000)
-    ego = c.obj(c.key(m, "ego"), "ego")
-    for k in ("vtype", "route"):
-        c.string(c.key(ego, k, "ego"), f"ego.{k}", nonempty=True)
-    c.number(c.key(ego, "depart", "ego"), "ego.depart", 0.0, 3600.0)  # convert-routes' --warmup range
-    for k in ("length", "width"):
-        c.number(c.key(ego, k, "ego"), f"ego.{k}", 0.0, 100.0, lo_open=True)
+def _ego(c: DocChecker, ego: dict) -> EgoVehicle:
+    vtype, sumo_route = (c.string(c.key(ego, k, "ego"), f"ego.{k}", nonempty=True)
+                         for k in ("vtype", "route"))
+    # convert-routes' --warmup range
+    depart = c.number(c.key(ego, "depart", "ego"), "ego.depart", 0.0, 3600.0)
+    length, width = (c.number(c.key(ego, k, "ego"), f"ego.{k}", 0.0, 100.0, lo_open=True)
+                     for k in ("length", "width"))
+    return EgoVehicle(vtype, sumo_route, depart, length, width)
+
+
+def _lanes(c: DocChecker, ego: dict) -> tuple[tuple[str, ...], tuple[tuple[int, ...], ...], tuple[int, ...]]:
+    """The ego's edges, the lanes of each it may continue from and the lane it drives on each."""
     edges = c.lst(c.key(ego, "edges", "ego"), "ego.edges", 1)
-    for i, e in enumerate(edges):
-        c.string(e, f"ego.edges[{i}]", nonempty=True)
+    names = tuple(c.string(e, f"ego.edges[{i}]", nonempty=True) for i, e in enumerate(edges))
+    out = []
     for key in ("lanes", "lane_path"):
         items = c.lst(c.key(ego, key, "ego"), f"ego.{key}")
         if len(items) != len(edges):
             raise c.fail(f"ego.{key}", f"has {len(items)} entries but ego.edges has {len(edges)}")
-        for i, v in enumerate(items):
-            if key == "lane_path":
-                c.integer(v, f"ego.lane_path[{i}]", 0, 1000)
-                continue
-            for j, x in enumerate(c.lst(v, f"ego.lanes[{i}]")):
-                c.integer(x, f"ego.lanes[{i}][{j}]", 0, 1000)
-    for k in ("start", "end"):
-        _lane_pos(c, c.key(ego, k, "ego"), f"ego.{k}")
-    route = c.obj(c.key(m, "route"), "route")
-    c.number(c.key(route, "length", "route"), "route.length", 0.0)
-    if "timeout" in route:
-        c.number(route["timeout"], "route.timeout", 0.0)
+        out.append(tuple(c.integer(v, f"ego.lane_path[{i}]", 0, 1000) if key == "lane_path" else
+                         tuple(c.integer(x, f"ego.lanes[{i}][{j}]", 0, 1000)
+                               for j, x in enumerate(c.lst(v, f"ego.lanes[{i}]")))
+                         for i, v in enumerate(items)))
+    return names, out[0], out[1]
+
+
+def _polyline(c: DocChecker, route: dict) -> tuple[tuple[tuple[float, float], ...], tuple[float, ...]]:
+    """The route's centre line and the lane heading at each of its points (() when absent)."""
     poly = c.lst(c.key(route, "polyline", "route"), "route.polyline", 2)
+    points = []
     for i, p in enumerate(poly):
         pt = c.lst(p, f"route.polyline[{i}]")
         if len(pt) != 2:
             raise c.fail(f"route.polyline[{i}]", f"must be [x, y], not {len(pt)} numbers")
-        c.number(pt[0], f"route.polyline[{i}][0]")
-        c.number(pt[1], f"route.polyline[{i}][1]")
-    if "headings" in route:
-        heads = c.lst(route["headings"], "route.headings")
-        if len(heads) != len(poly):
-            raise c.fail("route.headings", f"has {len(heads)} entries for {len(poly)} polyline points")
-        for i, h in enumerate(heads):
-            c.number(h, f"route.headings[{i}]")
-    for i, j in enumerate(c.lst(c.key(m, "junctions"), "junctions")):
-        place = f"junctions[{i}]"
-        j = c.obj(j, place)
-        for k in ("junction", "junction_type", "from_edge", "to_edge", "via"):
-            c.string(c.key(j, k, place), f"{place}.{k}")
-        for k in ("from_lane", "to_lane"):
-            c.integer(c.key(j, k, place), f"{place}.{k}", 0, 1000)
-        c.choice(c.key(j, "direction", place), f"{place}.direction", DIRECTIONS, "SUMO direction")
-        for k in ("choice", "roundabout"):
-            c.boolean(c.key(j, k, place), f"{place}.{k}")
-        c.number(c.key(j, "pos", place), f"{place}.pos", 0.0)
-    for i, lc in enumerate(c.lst(c.key(m, "lane_changes"), "lane_changes")):
-        place = f"lane_changes[{i}]"
-        lc = c.obj(lc, place)
-        c.string(c.key(lc, "edge", place), f"{place}.edge")
-        c.number(c.key(lc, "pos", place), f"{place}.pos", 0.0)
-        for k in ("from_lane", "to_lane"):
-            c.integer(c.key(lc, k, place), f"{place}.{k}", 0, 1000)
-        if "direction" in lc:
-            c.choice(lc["direction"], f"{place}.direction", ("left", "right"), "lane-change direction")
+        points.append(tuple(c.number(x, f"route.polyline[{i}][{k}]") for k, x in enumerate(pt)))
+    if "headings" not in route:
+        return tuple(points), ()
+    heads = c.lst(route["headings"], "route.headings")
+    if len(heads) != len(poly):
+        raise c.fail("route.headings", f"has {len(heads)} entries for {len(poly)} polyline points")
+    return tuple(points), tuple(c.number(h, f"route.headings[{i}]") for i, h in enumerate(heads))
+
+
+def _lane_indices(c: DocChecker, d: dict, place: str) -> tuple[int, int]:
+    """``from_lane`` and ``to_lane`` of the object ``d`` at ``place``."""
+    return c.integer(c.key(d, "from_lane", place), f"{place}.from_lane", 0, 1000), \
+        c.integer(c.key(d, "to_lane", place), f"{place}.to_lane", 0, 1000)
+
+
+def _junction(c: DocChecker, j: Any, place: str) -> JunctionPass:
+    j = c.obj(j, place)
+    junction, junction_type, from_edge, to_edge, via = (
+        c.string(c.key(j, k, place), f"{place}.{k}")
+        for k in ("junction", "junction_type", "from_edge", "to_edge", "via"))
+    from_lane, to_lane = _lane_indices(c, j, place)
+    direction = c.choice(c.key(j, "direction", place), f"{place}.direction", DIRECTIONS, "SUMO direction")
+    choice, roundabout = (c.boolean(c.key(j, k, place), f"{place}.{k}") for k in ("choice", "roundabout"))
+    pos = c.number(c.key(j, "pos", place), f"{place}.pos", 0.0)
+    return JunctionPass(junction, junction_type, from_edge, to_edge, from_lane, to_lane, via, direction,
+                        choice, roundabout, pos)
+
+
+def _lane_change(c: DocChecker, lc: Any, place: str) -> LaneChange:
+    lc = c.obj(lc, place)
+    edge = c.string(c.key(lc, "edge", place), f"{place}.edge")
+    pos = c.number(c.key(lc, "pos", place), f"{place}.pos", 0.0)
+    from_lane, to_lane = _lane_indices(c, lc, place)
+    if "direction" in lc:
+        c.choice(lc["direction"], f"{place}.direction", ("left", "right"), "lane-change direction")
+    return LaneChange(edge, pos, from_lane, to_lane)
+
+
+def _route(c: DocChecker, m: dict, ego: dict) -> EgoRoute:
+    """The ego's route: its lanes and ends (``ego``), centre line (``route``), the junctions it
+    crosses and the lane changes it needs."""
+    edges, lanes, lane_path = _lanes(c, ego)
+    start, end = (_lane_pos(c, c.key(ego, k, "ego"), f"ego.{k}") for k in ("start", "end"))
+    route = c.obj(c.key(m, "route"), "route")
+    length = c.number(c.key(route, "length", "route"), "route.length", 0.0)
+    if "timeout" in route:
+        c.number(route["timeout"], "route.timeout", 0.0)
+    polyline, headings = _polyline(c, route)
+    junctions = tuple(_junction(c, j, f"junctions[{i}]")
+                      for i, j in enumerate(c.lst(c.key(m, "junctions"), "junctions")))
+    changes = tuple(_lane_change(c, lc, f"lane_changes[{i}]")
+                    for i, lc in enumerate(c.lst(c.key(m, "lane_changes"), "lane_changes")))
+    return EgoRoute(edges=edges, lanes=lanes, lane_path=lane_path, start=start, end=end, polyline=polyline,
+                    length=length, junctions=junctions, lane_changes=changes, headings=headings)
+
+
+def _count(c: DocChecker, d: dict, key: str, lo: int) -> int | None:
+    """``traffic.<key>``, a whole number >= ``lo``, or None when absent."""
+    return c.integer(d[key], f"traffic.{key}", lo) if key in d else None
+
+
+def _traffic(c: DocChecker, m: dict) -> Traffic:
     traffic = c.obj(c.key(m, "traffic"), "traffic")
-    if "level" in traffic:
-        c.choice(traffic["level"], "traffic.level", _TRAFFIC_LEVELS, "traffic level")
-    c.number(c.key(traffic, "end", "traffic"), "traffic.end", 0.0, 1e7, lo_open=True)
-    if "source_hash" in m:
-        c.string(m["source_hash"], "source_hash")
+    level = c.choice(traffic["level"], "traffic.level", _TRAFFIC_LEVELS, "traffic level") \
+        if "level" in traffic else ""
+    end = c.number(c.key(traffic, "end", "traffic"), "traffic.end", 0.0, 1e7, lo_open=True)
+    return Traffic(end, level, _count(c, traffic, "n_vehicles", 0), _count(c, traffic, "n_pedestrians", 0),
+                   _count(c, traffic, "max_vehicles", -1))
+
+
+def _header(c: DocChecker, m: dict) -> tuple[str, str, int, float, dict]:
+    """The manifest's route id, town, seed, step length (s) and weather."""
+    route_id = c.string(c.key(m, "route_id"), "route_id", nonempty=True, limit=200)
+    town = c.string(c.key(m, "town"), "town", limit=200)
+    seed = c.integer(c.key(m, "seed"), "seed", 0, 2**31 - 1)
+    step_length = c.number(m["step_length"], "step_length", 0.0, 1.0, lo_open=True) \
+        if "step_length" in m else STEP_LENGTH
+    weather = c.obj(c.key(m, "weather"), "weather")
+    for k, v in weather.items():
+        c.string(v, f"weather.{k}", limit=1000)
+    return route_id, town, seed, step_length, dict(weather)
 
 
 #: the sections of a scenario's .sumocfg and the options it may set (those convert-routes writes)
@@ -352,47 +385,42 @@ def read_scenario(path: Path) -> Scenario:
     mpath = path / MANIFEST if path.is_dir() else path
     m = read_json_doc(mpath, SCENARIO_FORMAT, "scenario manifest", "run icrsumo convert-routes")
     c = DocChecker(mpath, _FIX)
-    check_manifest(m, c)
+    route_id, town, seed, step_length, weather = _header(c, m)
+    ego = c.obj(c.key(m, "ego"), "ego")
+    vehicle, route, traffic = _ego(c, ego), _route(c, m, ego), _traffic(c, m)
+    source_hash = c.string(m["source_hash"], "source_hash") if "source_hash" in m else ""
     base = mpath.parent
     net = _rel_file(c, base, c.key(m, "net"), "net", "network")
     check_xml_file(net, "network file", _FIX)
     sumocfg = _rel_file(c, base, c.key(m, "sumocfg"), "sumocfg", "SUMO config")
-    _check_sumocfg(sumocfg, sumocfg, net, float(m.get("step_length", STEP_LENGTH)))
-    ego, st = m["ego"], m["ego"]["start"]
-    return Scenario(
-        route_id=m["route_id"], town=m["town"], dir=base, net=net, sumocfg=sumocfg,
-        seed=int(m["seed"]), ego_edges=tuple(ego["edges"]), start_lane=st["lane"],
-        start_pos=float(st["pos"]), start=(float(st["x"]), float(st["y"]), float(st["heading"])),
-        polyline=tuple((float(x), float(y)) for x, y in m["route"]["polyline"]),
-        headings=tuple(float(h) for h in m["route"].get("headings", ())),
-        length=float(m["route"]["length"]), ego_depart=float(ego["depart"]),
-        end_time=float(m["traffic"]["end"]), weather=dict(m["weather"]), manifest=m,
-    )
+    _check_sumocfg(sumocfg, sumocfg, net, step_length)
+    return Scenario(route_id=route_id, town=town, dir=base, net=net, sumocfg=sumocfg, seed=seed,
+                    step_length=step_length, ego=vehicle, route=route, traffic=traffic, weather=weather,
+                    source_hash=source_hash, manifest=m)
 
 
 def check_against_net(sc: Scenario, net) -> None:
     """InputError unless every edge and lane the manifest of ``sc`` names is a passenger-car
     edge / lane of ``net`` (a :class:`~icrsumo.networks.RoadNet`): a manifest edited by hand or
     paired with another network fails here, naming the key, not later in SUMO."""
-    m, c = sc.manifest, DocChecker(sc.dir / MANIFEST, _FIX)
+    route, c = sc.route, DocChecker(sc.dir / MANIFEST, _FIX)
 
     def edge(e: str, place: str) -> None:
         if e not in net.passenger_lanes:
             raise c.fail(place, f"edge {short(e)} is not a car edge of {net.path.name}",
                          f"{_FIX} (the manifest and its network disagree)")
 
-    for i, e in enumerate(m["ego"]["edges"]):
+    for i, e in enumerate(route.edges):
         edge(e, f"ego.edges[{i}]")
-    for k in ("start", "end"):
-        lane = m["ego"][k]["lane"]
-        if lane not in net.lane_shape:
-            raise c.fail(f"ego.{k}.lane", f"lane {short(lane)} is not a car lane of {net.path.name}",
+    for k, end in (("start", route.start), ("end", route.end)):
+        if end.lane not in net.lane_shape:
+            raise c.fail(f"ego.{k}.lane", f"lane {short(end.lane)} is not a car lane of {net.path.name}",
                          f"{_FIX} (the manifest and its network disagree)")
-    for i, j in enumerate(m["junctions"]):
-        edge(j["from_edge"], f"junctions[{i}].from_edge")
-        edge(j["to_edge"], f"junctions[{i}].to_edge")
-    for i, lc in enumerate(m["lane_changes"]):
-        edge(lc["edge"], f"lane_changes[{i}].edge")
+    for i, j in enumerate(route.junctions):
+        edge(j.from_edge, f"junctions[{i}].from_edge")
+        edge(j.to_edge, f"junctions[{i}].to_edge")
+    for i, lc in enumerate(route.lane_changes):
+        edge(lc.edge, f"lane_changes[{i}].edge")
 
 
 def find_scenarios(root: Path) -> list[Path]:

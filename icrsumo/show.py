@@ -15,7 +15,7 @@ import numpy as np
 from .agents.base import Observation
 from .convert import safe_name
 from .decisions import Decision, divergence
-from .errors import InputError
+from .errors import Field, InputError
 from .fsio import bounded_name
 from .sim.callbacks import EpisodeCallback
 from .store import ResultStore
@@ -52,7 +52,7 @@ def failure_moment(log: EpisodeLog, scoring: str, decisions: Sequence[Decision] 
     :func:`icrsumo.decisions.classify_decisions`), taken when the ego reached that junction or
     lane change, where the branch is chosen; else its termination (for a completed episode
     without infractions: its end)."""
-    from .metrics import score_episode
+    from .scoring import score_episode
 
     moments = []
     result = score_episode(log, scoring)
@@ -115,14 +115,14 @@ def _find(store: ResultStore, agent: str, route: str, family: str, k: int, seed:
             return r
     if not recs:
         raise InputError(store.path, "", "holds no episodes", "run icrsumo evaluate into this folder first")
-    for what, have, value in (("--agent", {r.agent for r in recs}, agent),
-                              ("--route", {r.route_id for r in recs}, route),
-                              ("--family", {str(r.family) for r in recs}, family)):
+    for what, have, value in ((Field("agent"), {r.agent for r in recs}, agent),
+                              (Field("route"), {r.route_id for r in recs}, route),
+                              (Field("family"), {str(r.family) for r in recs}, family)):
         if value not in have:
             shown = ", ".join(sorted(have)[:8]) + (", ..." if len(have) > 8 else "")
             raise InputError(what, value, "no stored episode has it", f"use one of {shown}")
     ks = sorted({r.k for r in recs if (r.agent, r.route_id, str(r.family)) == (agent, route, family)})
-    raise InputError("--k", str(k), f"no stored episode of {agent} on {route} in {family} has it",
+    raise InputError(Field("k"), str(k), f"no stored episode of {agent} on {route} in {family} has it",
                      f"use one of {', '.join(map(str, ks))}" if ks else "pick another family or route")
 
 
@@ -189,14 +189,14 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
         stored_fp = store.episode_fingerprint(rec.agent, rec.route_id, rec.family, rec.k, rec.seed)
     if stored_text is None:
         raise InputError(out / "results.sqlite", f"episode {agent}/{route}/{family}/{k}", "has no stored log",
-                         "run it again into another --out folder")
+                         f"run it again into another {Field('out')} folder")
     stored = loads_log(stored_text)
     entry = (cfg.get("agents") or {}).get(agent)
     spec = spec or (entry.get("spec") if isinstance(entry, dict) else None) or agent
     if spec.startswith(PYTHON_PREFIX):
-        raise InputError("--agent", agent, f"was given to the Python API as an object ({spec}), which "
+        raise InputError(Field("agent"), agent, f"was given to the Python API as an object ({spec}), which "
                          "cannot be rebuilt from its name",
-                         "pass --spec module:Class (or path/file.py:Class)")
+                         f"pass {Field('spec')} module:Class (or path/file.py:Class)")
     factory = agent_factory(spec)
     fp = fingerprint(factory)
     factory = bind_agents({spec: factory}, out)[spec]  # an LLM agent: answered from OUT/llm-cache
@@ -205,9 +205,9 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
     if guards is not None:  # a guarded row: its fingerprint covers the guard (evaluation.run)
         fp = guarded_fingerprint(fp, fingerprint(guards[0]))
     if stored_fp and fp != stored_fp:
-        raise InputError("--agent", agent, f"the agent {spec} is now another agent (fingerprint {short(fp)}, "
-                         f"stored {short(stored_fp)}): the replay would not be the stored "
-                         "episode",
+        raise InputError(Field("agent"), agent,
+                         f"the agent {spec} is now another agent (fingerprint {short(fp)}, "
+                         f"stored {short(stored_fp)}): the replay would not be the stored episode",
                          "restore the agent's code or checkpoint as it was")
     sc = _scenario(out, cfg, route)
     instr_file = _instructions(out, rec)

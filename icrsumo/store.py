@@ -17,7 +17,7 @@ from collections.abc import Collection, Iterator, Mapping
 from dataclasses import asdict, fields
 from pathlib import Path
 
-from .errors import InputError
+from .errors import Field, InputError
 from .types import EpisodeLog, EpisodeRecord
 from .vocab import EpisodeStatus, EventKind, Family, Termination, TerminationClass
 
@@ -222,8 +222,8 @@ class ResultStore:
             if other and name not in replace:
                 raise InputError(self.path, f"agent {name}", f"holds episodes of another agent of that name "
                                  f"(fingerprint {short(other[0])}; the agent given now is {short(fp)})",
-                                 f"use another --out folder, or --replace-agent {name} to delete that "
-                                 f"agent's stored episodes and run it again")
+                                 f"use another {Field('out')} folder, or {Field('replace_agents')} {name} "
+                                 f"to delete that agent's stored episodes and run it again")
             if "" in old and name not in replace:
                 unmarked.append(name)
         return unmarked

@@ -282,7 +282,7 @@ class EpisodeLog:
     of the next route points, as InRouteTest measures it). ``route_length`` (m): the dense
     route's length. ``route``: the route polyline (m; a third value per point: the lane's
     heading there, rad), from which the rules rebuild the dense route
-    (:class:`icrsumo.termination.DenseRoute`). Per step too, for Leaderboard 2.0's rules:
+    (:class:`icrsumo.scoring.route.DenseRoute`). Per step too, for Leaderboard 2.0's rules:
     ``traffic_speed`` (m/s, mean speed of the other vehicles, -1 when there are none) and
     ``speed_limit`` (m/s, of the nearest driving lane); empty in logs that do not record them.
     ``model_calls``: the agent's questions to a language model and their answers

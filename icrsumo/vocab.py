@@ -41,7 +41,7 @@ class TerminationClass(StrEnum):
 
 
 class Termination(StrEnum):
-    """Why an episode ended (Leaderboard 1.0's rules, :mod:`icrsumo.termination`). completed:
+    """Why an episode ended (Leaderboard 1.0's rules, :mod:`icrsumo.scoring.criteria`). completed:
     more than 99 % of the route and within 10 m of its end; route_deviation: 30 m or more from
     the route, or more than 30 % of the route advanced while 15 m or more from it;
     agent_blocked: more than 180 s since the ego last moved at 0.1 m/s or more; route_timeout:

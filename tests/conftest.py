@@ -86,7 +86,7 @@ def cache(tmp_path_factory):
 @pytest.fixture(scope="module")
 def suite(cache) -> Path:
     """A convert-routes folder holding tiny_003 (the cached bundled route; converts it once)."""
-    from icrsumo.cache import bundled_route
+    from icrsumo.bundled import bundled_route
 
     sc_dir, _ = bundled_route("tiny_003")
     return sc_dir.parents[1]

@@ -1,5 +1,5 @@
 """A test oracle: CARLA Leaderboard 1.0's route scoring transcribed in the leaderboard's own
-shape, independently of icrsumo.termination / icrsumo.metrics, to score a recorded episode log.
+shape, independently of icrsumo.scoring's rule code, to score a recorded episode log.
 
 One class per criterion of scenario_runner's ``atomic_criteria.py`` (branch ``leaderboard-1.0``)
 as ``route_scenario.py`` builds them, each with an ``update()`` per tick (a logged step) and the
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from icrsumo.termination import dense_route
+from icrsumo.scoring.route import dense_route
 from icrsumo.types import EpisodeLog
 
 PENALTY_COLLISION_PEDESTRIAN = 0.50

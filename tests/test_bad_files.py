@@ -422,6 +422,7 @@ _SCENARIO_CASES = [
     (("seed",), -3, "seed: seed = -3 is out of range"),
     (("step_length",), 0, "step_length: step_length = 0 is out of range"),
     (("traffic", "level"), "gridlock", "traffic.level: unknown traffic level 'gridlock'"),
+    (("traffic", "n_vehicles"), "3", "traffic.n_vehicles: n_vehicles must be an integer, not str"),
     (("traffic",), _DEL, "top level: missing key 'traffic'"),
     (("weather",), ["ClearNoon"], "weather: weather must be an object, not list"),
     (("route_id",), "", "route_id: route_id must not be empty"),

@@ -52,6 +52,30 @@ def test_scenario_files_are_complete(carla_mini_out):
     assert not [p for p in (carla_mini_out / "scenarios").iterdir() if p.name.startswith(".")]
 
 
+def test_scenario_records_are_what_convert_wrote(carla_mini_out):
+    """read_scenario's typed records hold the manifest's values: the route with its junction
+    passes and lane changes (as routing produced them), the ego, the traffic."""
+    from dataclasses import asdict
+
+    for d in find_scenarios(carla_mini_out):
+        sc = read_scenario(d)
+        m, route = sc.manifest, sc.route
+        assert route.junctions and [asdict(j) for j in route.junctions] == m["junctions"]
+        assert [dict(asdict(c), direction=c.direction) for c in route.lane_changes] == m["lane_changes"]
+        assert (list(route.edges), [list(x) for x in route.lanes], list(route.lane_path)) == \
+            (m["ego"]["edges"], m["ego"]["lanes"], m["ego"]["lane_path"])
+        assert (asdict(route.start), asdict(route.end)) == (m["ego"]["start"], m["ego"]["end"])
+        assert [list(p) for p in route.polyline] == m["route"]["polyline"]
+        assert list(route.headings) == m["route"]["headings"] and route.length == m["route"]["length"]
+        assert asdict(sc.ego) == {"vtype": m["ego"]["vtype"], "sumo_route": m["ego"]["route"],
+                                  **{k: m["ego"][k] for k in ("depart", "length", "width")}}
+        t = m["traffic"]
+        assert (sc.traffic.level, sc.traffic.end, sc.traffic.n_vehicles, sc.traffic.n_pedestrians,
+                sc.traffic.max_vehicles) == (t["level"], t["end"], t["n_vehicles"], t["n_pedestrians"],
+                                             t["max_vehicles"])
+        assert (sc.step_length, sc.source_hash) == (m["step_length"], m["source_hash"])
+
+
 def test_conversion_is_byte_identical_and_reused(tmp_path, data_dir):
     outs = []
     for name in ("a", "b"):

@@ -21,9 +21,11 @@ import icrsumo.env  # noqa: E402,F401 - registers the id
 from icrsumo.agents.base import Action, AgentError  # noqa: E402
 from icrsumo.dynamics import Control  # noqa: E402
 from icrsumo.logs import dumps_log  # noqa: E402
-from icrsumo.metrics import score_episode  # noqa: E402
+from icrsumo.scoring import score_episode  # noqa: E402
+from icrsumo.scoring.criteria import run_monitor  # noqa: E402
+from icrsumo.scoring.lb1 import LB1_RULES  # noqa: E402
+from icrsumo.scoring.route import dense_route  # noqa: E402
 from icrsumo.sim.episode import run_episode  # noqa: E402
-from icrsumo.termination import dense_route, run_monitor  # noqa: E402
 
 pytestmark = pytest.mark.sumo
 
@@ -89,7 +91,7 @@ def test_rollout_matches_run_episode_and_reports_metrics(cache):
     # the documented reward: RC, minus 100 (1 - f) per event infraction, minus 100 x (route
     # advance made off the lanes) / route length
     penalty = sum(100 * (1 - i.factor) for i in r.infractions if i.kind != "outside_route_lanes")
-    mon, _ = run_monitor(ref)
+    mon, _ = run_monitor(ref, LB1_RULES)
     expected = mon.completion_pct - penalty - 100 * mon.outside_m / dense_route(ref).length
     assert total == pytest.approx(expected, abs=1e-9)
     assert steps == len(range(0, len(ref.t) - 1, 2))  # one step per decision (every 2nd SUMO step)

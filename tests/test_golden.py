@@ -50,7 +50,7 @@ def _rows(out: Path) -> str:
         rows = c.execute("SELECT * FROM episodes ORDER BY agent, route_id, family, k, seed").fetchall()
     lines = []
     for r in rows:
-        d = {k: r[k] for k in r.keys() if k not in ("fingerprint", "log")}
+        d = {k: r[k] for k in r.keys() if k not in ("fingerprint", "log")}  # noqa: SIM118 - a Row iterates values
         d["log_sha256"] = hashlib.sha256(r["log"] or b"").hexdigest()
         lines.append(json.dumps(d, sort_keys=True))
     return "\n".join(lines) + "\n"

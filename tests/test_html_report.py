@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import tempfile
 import time
 from pathlib import Path
 
@@ -18,10 +19,10 @@ pytestmark = pytest.mark.sumo
 ROUTES = ("tiny_003", "tiny_012")
 
 
-def _browser(tmp: Path):
+def _browser():
     """A headless Chromium driven through chromedriver (a skip only outside CI: in CI the
-    browser must be there); its temporary files go into ``tmp`` (a test's tmp_path), not the
-    machine's /tmp."""
+    browser must be there). Its profile and scratch folders go into one short-named temporary
+    folder (a Unix socket's path inside it must stay under 108 bytes) that ``quit()`` removes."""
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     driver = shutil.which("chromedriver")
     try:
@@ -39,9 +40,24 @@ def _browser(tmp: Path):
                 "--window-size=1300,1800"):
         opts.add_argument(arg)
     opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    opts.add_argument(f"--user-data-dir={tmp / 'chromium-profile'}")
+    tmp = Path(tempfile.mkdtemp(prefix="icr-chrome-"))
+    opts.add_argument(f"--user-data-dir={tmp / 'profile'}")
     env = {**os.environ, "TMPDIR": str(tmp)}  # Chromium's own scratch folders
-    return webdriver.Chrome(service=Service(driver, env=env), options=opts)
+    try:
+        browser = webdriver.Chrome(service=Service(driver, env=env), options=opts)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    quit_browser = browser.quit
+
+    def quit_and_clean() -> None:
+        try:
+            quit_browser()
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+    browser.quit = quit_and_clean
+    return browser
 
 
 @pytest.fixture(scope="module")
@@ -61,8 +77,8 @@ def test_the_page_is_self_contained(report):
         assert f'data-route="{route}"' in page
 
 
-def test_it_loads_in_chromium_without_errors_and_its_filters_and_clips_work(report, tmp_path):
-    driver = _browser(tmp_path)
+def test_it_loads_in_chromium_without_errors_and_its_filters_and_clips_work(report):
+    driver = _browser()
     try:
         driver.get(report.as_uri())
         routes = driver.find_elements("css selector", "section.route")

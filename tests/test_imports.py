@@ -6,6 +6,7 @@ into the closed loop's internals (they may use ``icrsumo.sim.episode`` and
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import icrsumo
@@ -138,3 +139,52 @@ def test_only_the_backend_imports_libsumo():
 def test_only_the_inference_runtime_imports_onnxruntime():
     users = sorted(name for name, path in _modules().items() if "onnxruntime" in _top_level_names(path))
     assert users == ["icrsumo.learn.runtime"]
+
+
+#: a Sphinx cross-reference to something of the package (``:mod:`~icrsumo.agents.watch```)
+_XREF = re.compile(r":(?:mod|func|class|data|meth|attr|exc):`~?(icrsumo(?:\.\w+)+)`")
+
+
+def _top_level_defs(path: Path) -> set[str]:
+    """Names a module defines or imports at its top level."""
+    names: set[str] = set()
+    for n in ast.parse(path.read_text(encoding="utf-8")).body:
+        if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            names.add(n.name)
+        elif isinstance(n, (ast.Assign, ast.AnnAssign)):
+            targets = n.targets if isinstance(n, ast.Assign) else [n.target]
+            names |= {t.id for t in targets if isinstance(t, ast.Name)}
+            if isinstance(n.value, ast.Dict):  # the names a package imports on first use
+                names |= {k.value for k in n.value.keys
+                          if isinstance(k, ast.Constant) and isinstance(k.value, str)}
+        elif isinstance(n, (ast.Import, ast.ImportFrom)):
+            names |= {(a.asname or a.name).split(".")[0] for a in n.names}
+    return names
+
+
+def test_docstrings_name_modules_that_exist():
+    """Every cross-reference to the package in its docstrings names a module that exists (and a
+    name that module defines): none is left behind when a module moves."""
+    modules = _modules()
+    bad = []
+    for name, path in modules.items():
+        for ref in _XREF.findall(path.read_text(encoding="utf-8")):
+            parts = ref.split(".")
+            k = max((i for i in range(1, len(parts) + 1) if ".".join(parts[:i]) in modules), default=0)
+            if k == 0 or (k < len(parts) and parts[k] not in _top_level_defs(modules[".".join(parts[:k])])):
+                bad.append(f"{name}: {ref}")
+    assert bad == []
+
+
+def test_the_bundled_suite_pipeline_keeps_its_old_name_and_one_default_suite():
+    """``icrsumo.bundled`` is the bundled-suite pipeline, ``icrsumo.cache`` (its old name) re-exports
+    it, and the default suite is defined once, in ``icrsumo.defaults``."""
+    import icrsumo.bundled
+    import icrsumo.cache
+
+    assert icrsumo.cache.bundled_route is icrsumo.bundled.bundled_route
+    assert icrsumo.cache.cache_root is icrsumo.bundled.cache_root
+    defined = sorted(name for name, path in _modules().items()
+                     for n in ast.parse(path.read_text(encoding="utf-8")).body if isinstance(n, ast.Assign)
+                     for t in n.targets if isinstance(t, ast.Name) and t.id == "DEFAULT_SUITE")
+    assert defined == ["icrsumo.defaults"]

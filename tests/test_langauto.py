@@ -114,10 +114,10 @@ def test_convert_routes_needs_no_flags_for_a_langauto_suite(tmp_path):
 @pytest.mark.sumo
 def test_a_langauto_route_runs_by_suite_name_alone(cache):
     from icrsumo.agents.privileged import RouteOracle
-    from icrsumo.cache import bundled_route
+    from icrsumo.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.metrics import score_episode
     from icrsumo.scenario import read_scenario
+    from icrsumo.scoring import score_episode
     from icrsumo.sim.episode import run_episode
 
     sc_dir, instr = bundled_route("0", "langauto-tiny")

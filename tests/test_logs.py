@@ -19,7 +19,7 @@ from icrsumo.logs import (
     result_to_dict,
     write_log,
 )
-from icrsumo.metrics import score_episode
+from icrsumo.scoring import score_episode
 from icrsumo.types import EpisodeLog, Event, TerminationClass
 
 

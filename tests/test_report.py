@@ -1,4 +1,4 @@
-"""Reports: tables, figures, paired rollout on a bundled net, Leaderboard 1.0 checkpoints."""
+"""Reports: tables, figures, paired rollout on a bundled net, the leaderboard files written."""
 
 from __future__ import annotations
 
@@ -14,13 +14,12 @@ from icrsumo.aggregate import summarize
 from icrsumo.fsio import dumps_json
 from icrsumo.report import (
     delta_bars,
-    leaderboard_checkpoint,
     paired_rollout,
     rd_to_plane,
     tables,
     write_report,
 )
-from icrsumo.types import EpisodeLog, EpisodeRecord
+from icrsumo.types import EpisodeLog
 
 
 @pytest.fixture(scope="module")
@@ -120,97 +119,6 @@ def test_paired_rollout_on_bundled_net(tmp_path):
     from matplotlib.image import imread
 
     assert imread(tmp_path / "long.png").shape[0] > imread(path).shape[0]  # wrapped captions add height
-
-
-def test_leaderboard_checkpoint():
-    recs = tiny() + [rec("B", "r4", "misleading", 0, 30, 100, 0.3,
-                         infractions=(("collision_vehicle", 0.6), ("red_light", 0.7),
-                                      ("outside_route_lanes", 0.3 / 0.42)))]
-    cp = leaderboard_checkpoint(recs, "B", "misleading")
-    assert set(cp) == {"_checkpoint", "entry_status", "eligible", "sensors", "values", "labels"}
-    # r1 k1 crashed in the simulator: the leaderboard stops there with 'Crashed', not eligible
-    assert cp["entry_status"] == "Crashed" and cp["eligible"] is False and cp["sensors"] == []
-    c = cp["_checkpoint"]
-    assert set(c) == {"global_record", "progress", "records"}
-    assert c["progress"] == [7, 7] and len(c["records"]) == 7
-    recs_by_id = {r["route_id"]: r for r in c["records"]}
-    assert [r["index"] for r in c["records"]] == list(range(7))
-    first = c["records"][0]
-    assert set(first) == {"route_id", "index", "status", "infractions", "scores", "meta"}
-    assert set(first["infractions"]) == {
-        "collisions_layout", "collisions_pedestrian", "collisions_vehicle", "outside_route_lanes",
-        "red_light", "route_dev", "route_timeout", "stop_infraction", "vehicle_blocked"}
-    assert set(first["scores"]) == {"score_route", "score_penalty", "score_composed"}
-    assert set(first["meta"]) == {"route_length", "duration_game", "duration_system"}
-
-    r1 = recs_by_id["RouteScenario_r1_misleading_0"]
-    assert r1["status"] == "Failed - Agent deviated from the route"
-    assert r1["infractions"]["route_dev"] == ["Agent deviated from the route"]
-    assert recs_by_id["RouteScenario_r1_misleading_1"]["status"] == "Failed - Simulation crashed"
-    assert recs_by_id["RouteScenario_r2_misleading_1"]["status"] == "Failed - Agent timed out"
-    assert recs_by_id["RouteScenario_r2_misleading_1"]["infractions"]["route_timeout"] == ["Route timeout."]
-    assert recs_by_id["RouteScenario_r3_misleading_0"]["status"] == "Completed"
-    r4 = recs_by_id["RouteScenario_r4_misleading_0"]
-    assert r4["scores"] == {"score_route": 100.0, "score_penalty": 0.3, "score_composed": 30.0}
-    assert len(r4["infractions"]["collisions_vehicle"]) == 1 and len(r4["infractions"]["red_light"]) == 1
-    # the outside-lanes entry comes from the stored infraction (1 - 0.3 / 0.42 = 28.57 %) ...
-    assert "28.57%" in r4["infractions"]["outside_route_lanes"][0]
-    # ... never from IS arithmetic: r3 k0 has IS 0.9 but no such infraction, so no entry
-    assert recs_by_id["RouteScenario_r3_misleading_0"]["infractions"]["outside_route_lanes"] == []
-
-    g = c["global_record"]
-    assert g["index"] == -1 and g["route_id"] == -1 and g["status"] == "Failed"
-    assert set(g) >= {"route_id", "index", "status", "infractions", "scores", "meta"}
-    # means over every route, the crashed one (0) included
-    assert g["scores"]["score_composed"] == pytest.approx((20 + 0 + 10 + 50 + 90 + 45 + 30) / 7)
-    # rates: sum over routes of count / max(RC / 100 x 0.5 km, 0.001): route deviations on r1 k0
-    # (RC 20: 1 / 0.1), r2 k0 (RC 10: 1 / 0.05), r3 k1 (RC 50: 1 / 0.25); r4's collision (RC 100)
-    assert g["infractions"]["route_dev"] == pytest.approx(10 + 20 + 4, abs=1e-6)
-    assert g["infractions"]["collisions_vehicle"] == pytest.approx(2.0, abs=1e-6)
-    assert ["RouteScenario_r1_misleading_1", 1, "Failed - Simulation crashed"] in g["meta"]["exceptions"]
-    assert g["meta"]["total_length"] == 3000.0 and g["meta"]["duration_game"] == 360.0  # crashed: 0
-    assert g["meta"]["duration_system"] == -1
-    assert len(cp["values"]) == len(cp["labels"]) == 12
-    assert cp["labels"][0] == "Avg. driving score"
-    assert cp["values"][0] == f"{g['scores']['score_composed']:.3f}"
-    json.loads(dumps_json(cp))  # serialisable, no NaN
-
-    # without the simulator crash: deviations and timeouts name the agent
-    ok = [r for r in recs if r.status == "done"]
-    assert leaderboard_checkpoint(ok, "B", "misleading")["entry_status"] == "Finished with agent errors"
-    done = [rec("B", "r3", "misleading", 0, 90, 100, 0.9)]
-    assert leaderboard_checkpoint(done, "B", "misleading")["entry_status"] == "Finished"
-
-    blocked = [EpisodeRecord("X", "r", "noise", 0, 1, "done", termination="agent_blocked",
-                             termination_class="TO", is_=1.0)]
-    cb = leaderboard_checkpoint(blocked, "X", "noise")["_checkpoint"]["records"][0]
-    assert cb["status"] == "Failed - Agent got blocked" and len(cb["infractions"]["vehicle_blocked"]) == 1
-
-
-def test_leaderboard_2_results_file():
-    from icrsumo.report import leaderboard_checkpoint_lb2
-
-    recs = [rec("B", "r1", "misleading", 0, 100, 100, 1.0),                       # Perfect
-            rec("B", "r2", "misleading", 0, 85, 100, 0.85, infractions=(("min_speed", 0.85),)),
-            rec("B", "r3", "misleading", 0, 40, 50, 0.8, "RD",
-                infractions=(("outside_route_lanes", 0.8),), outside_m=50.0),
-            rec("B", "r4", "misleading", 0, status="crashed")]
-    cp = leaderboard_checkpoint_lb2(recs, "B", "misleading")
-    rs = cp["_checkpoint"]["records"]
-    assert [r["status"] for r in rs] == ["Perfect", "Completed", "Failed - Agent deviated from the route",
-                                         "Failed - Simulation crashed"]
-    assert rs[1]["infractions"]["min_speed_infractions"] == [
-        "Average speed is 50.00% of the surrounding traffic's one"]
-    # the metres off the lanes, where 2.0's global statistics read them
-    assert rs[2]["infractions"]["outside_route_lanes"][0].split(" ")[8] == "50.000"
-    g = cp["_checkpoint"]["global_record"]
-    assert g["status"] == "Failed"
-    assert g["scores_mean"]["score_composed"] == round((100 + 85 + 40 + 0) / 4, 6)
-    # pooled: counts over the km driven (0.5 + 0.5 + 0.25 + 0 km); outside lanes in km
-    assert g["infractions"]["route_dev"] == round(1 / 1.25, 3)
-    assert g["infractions"]["outside_route_lanes"] == 0.05
-    assert len(cp["values"]) == len(cp["labels"]) == 15
-    assert cp["entry_status"] == "Crashed" and cp["eligible"] is False
 
 
 def test_write_report(summary, tmp_path):

@@ -68,7 +68,7 @@ def test_the_video_plays_in_chromium(folder, tmp_path):
     """The show video decodes in a real browser's <video> element (a skip only outside CI)."""
     from test_html_report import _browser
 
-    driver = _browser(tmp_path)  # first: a skip costs no replay
+    driver = _browser()  # first: a skip costs no replay
     try:
         dest = tmp_path / "watch"
         assert main(["show", str(folder), "--agent", "route-oracle", "--route", "tiny_003",

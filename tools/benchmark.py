@@ -256,8 +256,8 @@ def _one_route_file(split: str, route: str, out: Path) -> Path:
 # --------------------------------------------------------------------------- sections
 def closed_loop(sc, baseline, agents: list[str], repeats: int, log=print) -> dict:
     """Per-step costs of bare SUMO, SUMO with a moved ego, the runner alone and each agent."""
-    length = float(sc.manifest["ego"]["length"])
-    dt = float(sc.manifest.get("step_length", 0.05))
+    length = sc.ego.length
+    dt = sc.step_length
     # the route-oracle's actions and trajectory (not timed), for "runner only" and "ego moved"
     rec = _Recorder(make_agent("route-oracle"))
     ref_log = run_episode(sc, baseline, rec)
@@ -329,7 +329,7 @@ def closed_loop(sc, baseline, agents: list[str], repeats: int, log=print) -> dic
 
 
 def _spans(sc, net) -> tuple[tuple[float, float], ...]:
-    cuts = [0.0] + [float(j["pos"]) for j in sc.manifest["junctions"]] + [sc.length]
+    cuts = [0.0] + [j.pos for j in sc.route.junctions] + [sc.length]
     return tuple((cuts[i], cuts[i + 1]) for i, e in enumerate(sc.ego_edges)
                  if i + 1 < len(cuts) and is_highway(net, e))
 
@@ -705,8 +705,7 @@ def main(argv: list[str] | None = None) -> int:
         baseline = read_instruction_sets(work / "instr" / f"{args.route}.json")[0]
         sc = read_scenario(sc_dir)
         res["scenario"] = {"route": sc.route_id, "town": sc.town, "length_m": sc.length,
-                           "n_vehicles": sc.manifest["traffic"].get("n_vehicles"),
-                           "n_pedestrians": sc.manifest["traffic"].get("n_pedestrians")}
+                           "n_vehicles": sc.traffic.n_vehicles, "n_pedestrians": sc.traffic.n_pedestrians}
         res["setup_s"] = time.perf_counter() - t0
         log(f"closed loop on {sc.route_id}: {', '.join(agents)} ({repeats} repeats)")
         res["closed_loop"] = closed_loop(sc, baseline, agents, repeats, log)

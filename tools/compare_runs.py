@@ -114,7 +114,7 @@ def roadside_causes(old: Path, res: dict) -> list[dict]:
             lanes_only = DrivableArea(_polygonal(shapely.union_all(lane_polygons(net))))
             cache[sc.route_id] = (BevRenderer(net, BevSpec()), drivable_area(net), lanes_only)
         raster, area, lanes_only = cache[sc.route_id]
-        size = (float(sc.manifest["ego"]["length"]), float(sc.manifest["ego"]["width"]))
+        size = (sc.ego.length, sc.ego.width)
         steps = rows[key]["log"]["steps"]
         for side, mine, other in (("old", e["old_events"], e["new_events"]),
                                   ("new", e["new_events"], e["old_events"])):

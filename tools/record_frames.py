@@ -92,10 +92,9 @@ def main() -> None:
             iset, _ = baseline_set(sc, load_banks(None), 0)
             tape = FrameTape()
             log = run_episode(sc, iset, make(), callbacks=[tape])
-            m = sc.manifest
             doc = {"case": case, "town": sc.town, "net": Path(sc.net).name, "route_id": rid,
-                   "polyline": [list(p) for p in sc.polyline], "edges": list(m["ego"]["edges"]),
-                   "size": [float(m["ego"]["length"]), float(m["ego"]["width"])],
+                   "polyline": [list(p) for p in sc.polyline], "edges": list(sc.ego_edges),
+                   "size": [sc.ego.length, sc.ego.width],
                    "termination": str(log.termination), "steps": tape.rows[:MAX_STEPS]}
             path = OUT / f"{case}.json"
             path.write_text(json.dumps(doc, separators=(",", ":")) + "\n", encoding="utf-8")

@@ -43,7 +43,7 @@ from multiprocessing.connection import Client, Connection, Listener, wait
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError, describe
+from ..errors import Field, InputError, describe
 from ..procs import die_with_parent, spawn_context
 from .base import AgentError, EpisodeInfo, Observation
 from .batching import TASK_KINDS, BatchingCore, Task
@@ -135,8 +135,9 @@ def start_server(spec: str, device: str, max_batch: int = 32, key: bytes | None 
     privileged agent, no CUDA, ...) are InputErrors."""
     factory = factory if factory is not None else agent_factory(spec)
     if getattr(factory, "privileged", False):
-        raise InputError("--batch-inference", spec, "is a privileged agent: it needs the simulator's "
-                         "World view, which only the episode worker has", "leave out --batch-inference")
+        raise InputError(Field("batch_inference"), spec, "is a privileged agent: it needs the simulator's "
+                         "World view, which only the episode worker has",
+                         f"leave out {Field('batch_inference')}")
     name = agent_name(spec, factory)
     key = key if key is not None else secrets.token_bytes(32)
     address, folder = _socket_address()
@@ -156,8 +157,10 @@ def start_server(spec: str, device: str, max_batch: int = 32, key: bytes | None 
         control.close()
         if folder is not None:
             folder.cleanup()
-        raise InputError("--batch-inference", device, f"the inference process of {spec} failed: {payload}",
-                         "pick a device this machine has (cpu, cuda), or leave out --batch-inference")
+        raise InputError(Field("batch_inference"), device,
+                         f"the inference process of {spec} failed: {payload}",
+                         f"pick a device this machine has (cpu, cuda), or leave out "
+                         f"{Field('batch_inference')}")
     return BatchServer(name, address, key, proc, control, folder)
 
 

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..errors import InputError, describe
+from ..errors import Field, InputError, describe
 from .base import Agent, AgentError, batch_hook, validate_action
 
 #: what a task asks for
@@ -50,7 +50,8 @@ class BatchingCore:
     def __init__(self, factory: Callable[[], Agent], max_batch: int = 8, max_sessions: int = 256,
                  name: str | None = None) -> None:
         if max_batch < 1:
-            raise InputError("--max-batch", str(max_batch), "must be at least 1", "give a positive count")
+            raise InputError(Field("max_batch"), str(max_batch), "must be at least 1",
+                             "give a positive count")
         self.factory = factory
         self.name = name or str(getattr(factory, "name", "") or getattr(factory, "__name__", "agent"))
         self.batch = batch_hook(factory)

@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError, check_key_env, check_key_text, display_url
+from ..errors import Field, InputError, check_key_env, check_key_text, display_url
 from ..llmio import (
     Invalid,
     ResponseCache,
@@ -147,7 +147,7 @@ class LLMSettings:
         return f"{LLM_PREFIX}{self.model}" + ("+image" if self.image else "")
 
 
-def parse_spec(spec: str, option: str = "--agent") -> LLMSettings:
+def parse_spec(spec: str, option: Field = Field("agents")) -> LLMSettings:
     """The settings of ``llm:MODEL@URL[?key_env=VAR&image=1&format=F&timeout=S&seed=N]``
     (InputErrors naming ``option`` and the part that is wrong)."""
     rest = spec[len(LLM_PREFIX):] if spec.startswith(LLM_PREFIX) else spec
@@ -203,7 +203,7 @@ def with_options(spec: str, key_env: str | None = None, image: bool = False) -> 
     return spec + ("&" if "?" in spec.rpartition("@")[2] else "?") + "&".join(extra)
 
 
-def api_key(s: LLMSettings, option: str = "--agent") -> str | None:
+def api_key(s: LLMSettings, option: Field = Field("agents")) -> str | None:
     """The API key from the variable ``s.key_env`` names (None when none is named); an
     InputError (naming ``option``) when the variable is not set."""
     if not s.key_env:
@@ -558,7 +558,7 @@ class LLMFactory:
         return LLMFollower(self.settings)
 
 
-def bound(s: LLMSettings, out: Path, option: str = "--agent") -> LLMSettings:
+def bound(s: LLMSettings, out: Path, option: Field = Field("agents")) -> LLMSettings:
     """``s`` keeping its answers in ``out/llm-cache``, after checking (before any episode runs)
     that answers can be stored there and :func:`check_server`; a server that is unreachable is
     accepted when that cache holds answers (the run is then answered from it)."""
@@ -571,7 +571,7 @@ def bound(s: LLMSettings, out: Path, option: str = "--agent") -> LLMSettings:
     return replace(s, cache_dir=cache_dir, offline=offline)
 
 
-def check_server(s: LLMSettings, has_cache: bool, option: str = "--agent") -> bool:
+def check_server(s: LLMSettings, has_cache: bool, option: Field = Field("agents")) -> bool:
     """Check the API key variable and that the server answers (within ``s.timeout``) as an
     OpenAI-compatible server and serves ``s.model``; InputErrors naming ``option`` and the fix.
     Returns True (offline) when the server is unreachable but ``has_cache`` (the run is

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from ..defaults import DEFAULT_AGENT as _DEFAULT
-from ..errors import InputError
+from ..errors import Field, InputError
 from .base import Agent
 from .identity import PATH_MODULE_PREFIX
 
@@ -64,9 +64,9 @@ class AgentRegistry(Mapping[str, Callable[..., Agent]]):
     :meth:`register` and :meth:`unregister`). An entry given as ``"module:attr"`` is imported
     only when it is first asked for, so the registry imports no agent module of its own."""
 
-    #: what its entries are, and the command-line option that names one (for messages)
+    #: what its entries are, and the field that names one (for messages)
     kind = "agent"
-    option = "--agent"
+    option = Field("agents")
 
     def __init__(self) -> None:
         self._entries: dict[str, AgentEntry] = {}
@@ -124,7 +124,7 @@ class AgentRegistry(Mapping[str, Callable[..., Agent]]):
         return len(self._entries)
 
 
-def _load_target(name: str, entry: AgentEntry, option: str = "--agent") -> Callable[..., Agent]:
+def _load_target(name: str, entry: AgentEntry, option: Field = Field("agents")) -> Callable[..., Agent]:
     """The factory a lazy entry names (an InputError naming the entry under ``option`` when it
     cannot load)."""
     module, _, attr = entry.target.partition(":")
@@ -237,7 +237,7 @@ def load_class(spec: str) -> type:
     protocol (``icrsumo check-agent`` reports what is missing); errors are InputErrors."""
     target, _, cls_name = spec.rpartition(":")
     if not target or not cls_name:
-        raise InputError("--agent", spec, "not a built-in agent nor MODULE:CLASS",
+        raise InputError(Field("agents"), spec, "not a built-in agent nor MODULE:CLASS",
                          f"use one of {', '.join(REGISTRY)}, a module:Class, path/file.py:Class, "
                          "remote:http://HOST:PORT or llm:MODEL@http://HOST:PORT/v1")
     try:
@@ -256,13 +256,14 @@ def load_class(spec: str) -> type:
     except InputError:
         raise
     except BaseException as err:  # noqa: BLE001 - the user's module failed to import (or exited)
-        raise InputError("--agent", spec, f"cannot import {target} ({type(err).__name__}: {err})",
+        raise InputError(Field("agents"), spec, f"cannot import {target} ({type(err).__name__}: {err})",
                          "make the module importable (PYTHONPATH, dependencies)") from None
     cls = getattr(module, cls_name, None)
     if cls is None:
-        raise InputError("--agent", spec, f"{target} has no attribute {cls_name}", "check the class name")
+        raise InputError(Field("agents"), spec, f"{target} has no attribute {cls_name}",
+                         "check the class name")
     if not callable(cls):
-        raise InputError("--agent", spec, f"{target}.{cls_name} is not a class", "name the agent class")
+        raise InputError(Field("agents"), spec, f"{target}.{cls_name} is not a class", "name the agent class")
     return cls
 
 
@@ -271,7 +272,7 @@ def _import_class(spec: str) -> type:
     cls_name = spec.rpartition(":")[2]
     missing = [m for m in ("reset", "act") if not callable(getattr(cls, m, None))]
     if missing:
-        raise InputError("--agent", spec, f"{cls_name} does not implement the agent protocol "
+        raise InputError(Field("agents"), spec, f"{cls_name} does not implement the agent protocol "
                          f"(missing {', '.join(missing)})", "add reset(info) and act(obs) -> Action")
     return cls
 

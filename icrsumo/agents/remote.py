@@ -51,7 +51,7 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 
 from ..dynamics import Control
-from ..errors import InputError, check_key_env, check_key_text, display_url
+from ..errors import Field, InputError, check_key_env, check_key_text, display_url
 from ..llmio import authorization, redact, secrets_of
 from .base import Action, AgentError, AgentTimeout, EpisodeInfo, Observation
 
@@ -194,22 +194,23 @@ def parse_url(url: str) -> tuple[str, int, float, str | None]:
     parts = urlsplit(url)
     fix = "use remote:http://HOST:PORT, e.g. remote:http://127.0.0.1:8765 (?timeout=S&key_env=VAR optional)"
     if parts.scheme != "http" or not parts.hostname:
-        raise InputError("--agent", f"remote:{url}", "not an http://HOST:PORT address", fix)
+        raise InputError(Field("agents"), f"remote:{url}", "not an http://HOST:PORT address", fix)
     query = parse_qs(parts.query)
     try:
         port = parts.port or 80
         timeout = float(query.get("timeout", [DEFAULT_TIMEOUT])[0])
     except ValueError:
-        raise InputError("--agent", f"remote:{url}", "bad port or timeout", fix) from None
+        raise InputError(Field("agents"), f"remote:{url}", "bad port or timeout", fix) from None
     if not 0 < timeout < float("inf"):
-        raise InputError("--agent", f"remote:{url}", "timeout must be a positive number of seconds", fix)
+        raise InputError(Field("agents"), f"remote:{url}", "timeout must be a positive number of seconds",
+                         fix)
     key = None
     if "key_env" in query:
-        key = shared_key(query["key_env"][0], "--agent", f"remote:{url}")
+        key = shared_key(query["key_env"][0], Field("agents"), f"remote:{url}")
     return parts.hostname, port, timeout, key
 
 
-def shared_key(var: str, option: str, value: str) -> str:
+def shared_key(var: str, option: Field, value: str) -> str:
     """The shared key held by the environment variable ``var``; an InputError naming ``option``
     when ``var`` is no variable name or is not set (the key itself never goes on a command line)."""
     key = os.environ.get(check_key_env(var, option, value), "").strip()
@@ -363,13 +364,13 @@ class RemoteFactory:
         try:
             info = conn.request("GET", "/info")
         except AgentError as err:
-            raise InputError("--agent", f"remote:{url}", str(err),
+            raise InputError(Field("agents"), f"remote:{url}", str(err),
                              "start it with icrsumo serve-agent SPEC --port N, or fix the address") from None
         finally:
             conn.close()
         name = info.get("name")
         if not isinstance(name, str) or not name:
-            raise InputError("--agent", f"remote:{url}", "GET /info answered no agent name",
+            raise InputError(Field("agents"), f"remote:{url}", "GET /info answered no agent name",
                              "serve the agent with icrsumo serve-agent")
         self.name = name
         self.info = info

@@ -26,7 +26,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 
 from ..devices import check_device
-from ..errors import InputError
+from ..errors import Field, InputError
 from .batching import BatchingCore, Task
 from .identity import fingerprint
 from .registry import agent_factory, agent_name
@@ -64,8 +64,8 @@ class AgentServer(BatchingCore):
             self.httpd = ThreadingHTTPServer((host, port), Handler)
         except (OSError, OverflowError, TypeError) as err:
             why = getattr(err, "strerror", "") or err
-            raise InputError("--host/--port", f"{host}:{port}", f"cannot listen ({why})",
-                             "pick a free port or another --host") from None
+            raise InputError(f"{Field('host')}/{Field('port')}", f"{host}:{port}", f"cannot listen ({why})",
+                             f"pick a free port or another {Field('host')}") from None
         self.httpd.daemon_threads = True
         self.host, self.port = self.httpd.server_address[:2]
 
@@ -146,7 +146,7 @@ class _Handler(BaseHTTPRequestHandler):
             return True
         self.close_connection = True
         self._error(401, "this server requires its shared key: use remote:http://HOST:PORT?key_env=VAR with "
-                         "VAR holding the key it was started with (--key-env)")
+                         "VAR holding the key it was started with (icrsumo serve-agent --key-env)")
         return False
 
     def do_GET(self) -> None:  # noqa: N802 - http.server's naming
@@ -212,12 +212,12 @@ def serve(spec: str, host: str = "127.0.0.1", port: int = 8765, max_batch: int =
     ``key_env``: the environment variable holding a shared key every request must carry; a
     server on another host than the loopback without one says that it has no authentication."""
     if not isinstance(port, int) or not 0 <= port <= 65535:
-        raise InputError("--port", str(port), "out of range", "use 0 to 65535 (0: any free port)")
+        raise InputError(Field("port"), str(port), "out of range", "use 0 to 65535 (0: any free port)")
     if max_batch < 1:
-        raise InputError("--max-batch", str(max_batch), "must be at least 1", "give a positive count")
+        raise InputError(Field("max_batch"), str(max_batch), "must be at least 1", "give a positive count")
     if device is not None:
         check_device(device)
-    key = shared_key(key_env, "--key-env", key_env) if key_env is not None else None
+    key = shared_key(key_env, Field("key_env"), key_env) if key_env is not None else None
     server = AgentServer(spec, host, port, max_batch, device=device, key=key)
     if key is None and host not in _LOOPBACK and not host.startswith("127."):
         print(f"icrsumo: warning: serving on {host}: every machine that can reach port {server.port} can "

@@ -158,7 +158,7 @@ class EpisodeWorker:
     def run(self, job: Job) -> Outcome:
         """Run one episode and score it; every failure becomes an Outcome."""
         from ..logs import dumps_log, loads_log
-        from ..metrics import score_episode
+        from ..scoring import score_episode
         from ..sim.episode import RunOptions, run_episode
 
         try:

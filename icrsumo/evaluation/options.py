@@ -9,17 +9,17 @@ from pathlib import Path
 
 from ..agents.registry import DEFAULT_AGENT
 from ..devices import check_device
-from ..errors import InputError, check_seed
+from ..errors import Field, InputError, check_seed
 from ..fsio import check_out_dir
 from ..instructions.baseline_bank import load_baseline_bank
 from ..instructions.families import ALL_FAMILIES, FAMILIES
-from ..metrics import SCORINGS, scoring_names
 from ..routes import suite_file
+from ..scoring import SCORINGS, scoring_names
 from ..traffic import TRAFFIC_LEVELS
 
 #: execution backends: a local process pool, or Ray
 BACKENDS = ("local", "ray")
-#: seconds an agent's reset / act call may take by default (--agent-timeout)
+#: seconds an agent's reset / act call may take by default (``agent_timeout``)
 AGENT_TIMEOUT = 60.0
 
 
@@ -56,7 +56,7 @@ class EvalOptions:
     baseline_bank: Path | str | None = None
     #: run the stored crashed episodes again (a transient fault repaired in place)
     retry_crashed: bool = False
-    #: the scoring rules (``--scoring``): a name of :data:`icrsumo.metrics.SCORINGS`; part of the
+    #: the scoring rules (``--scoring``): a name of :data:`icrsumo.scoring.SCORINGS`; part of the
     #: out folder's configuration
     scoring: str = "lb1"
     #: agent names whose stored episodes (of another fingerprint) are deleted and run again
@@ -71,71 +71,70 @@ class EvalOptions:
         self._check_types()
         bad = [f for f in self.families if f not in ALL_FAMILIES]
         if bad or not self.families:
-            raise InputError("--family", bad[0] if bad else "", "unknown family",
+            raise InputError(Field("families"), bad[0] if bad else "", "unknown family",
                              f"use {', '.join(ALL_FAMILIES)}")
         if self.backend not in BACKENDS:
-            raise InputError("--backend", self.backend, "unknown backend", "use local or ray")
+            raise InputError(Field("backend"), self.backend, "unknown backend", "use local or ray")
         if not 1 <= self.k <= 64:
-            raise InputError("--k", str(self.k), "out of range", "use 1 to 64 (default 8)")
+            raise InputError(Field("k"), str(self.k), "out of range", "use 1 to 64 (default 8)")
         check_seed(self.seed)
         if self.max_batch < 1:
-            raise InputError("--max-batch", str(self.max_batch), "must be at least 1",
+            raise InputError(Field("max_batch"), str(self.max_batch), "must be at least 1",
                              "give a positive count")
         if self.workers < 1:
-            raise InputError("--workers", str(self.workers), "must be at least 1", "give a positive count")
+            raise InputError(Field("workers"), str(self.workers), "must be at least 1",
+                             "give a positive count")
         if self.agent_timeout is not None and not 0 < self.agent_timeout < float("inf"):
-            raise InputError("--agent-timeout", str(self.agent_timeout), "must be positive",
+            raise InputError(Field("agent_timeout"), str(self.agent_timeout), "must be positive",
                              "give seconds per agent call (0 on the command line: no limit)")
         check_out_dir(Path(self.out))
         if self.address is not None and self.backend != "ray":
-            raise InputError("--address", self.address, "is for the ray backend", "add --backend ray")
+            raise InputError(Field("address"), self.address, "is for the ray backend",
+                             f"add {Field('backend')} ray")
         if self.batch_inference is not None:
-            check_device(self.batch_inference, "--batch-inference")
+            check_device(self.batch_inference, Field("batch_inference"))
             if self.backend != "local":
-                raise InputError("--batch-inference", self.batch_inference, "works with the local backend "
-                                 "only (its workers reach the inference process through a Unix socket)",
-                                 "use --backend local")
+                raise InputError(Field("batch_inference"), self.batch_inference,
+                                 "works with the local backend only (its workers reach the inference "
+                                 "process through a Unix socket)",
+                                 f"use {Field('backend')} local")
             if self.inference_processes < 1:
-                raise InputError("--inference-processes", str(self.inference_processes),
+                raise InputError(Field("inference_processes"), str(self.inference_processes),
                                  "must be at least 1", "give a positive count")
         if self.agent_device is not None:
-            check_device(self.agent_device, "agent_device")
+            check_device(self.agent_device, Field("agent_device"))
         if self.scoring not in SCORINGS:
-            raise InputError("--scoring", str(self.scoring), "unknown scoring",
+            raise InputError(Field("scoring"), str(self.scoring), "unknown scoring",
                              f"use {', '.join(scoring_names())}")
         if self.traffic not in TRAFFIC_LEVELS:
-            raise InputError("--traffic", str(self.traffic), "unknown traffic level",
+            raise InputError(Field("traffic"), str(self.traffic), "unknown traffic level",
                              f"use {', '.join(TRAFFIC_LEVELS)}")
         if self.baseline_bank is not None:
             load_baseline_bank(self.baseline_bank)  # an InputError for a bad file, before anything runs
-        suite_file(self.suite, "--suite", folders=True)  # a missing file named as one, not a suite
+        suite_file(self.suite, folders=True)  # a missing file named as one, not a suite
 
     def _check_types(self) -> None:
-        def option(name: str) -> str:
-            return "--" + name.replace("_", "-")
-
         for name in ("k", "seed", "workers", "max_batch", "inference_processes"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int):
-                raise InputError(option(name), repr(v)[:40], f"must be an integer, not {type(v).__name__}",
+                raise InputError(Field(name), repr(v)[:40], f"must be an integer, not {type(v).__name__}",
                                  "give a whole number")
         for name in ("quiet", "retry_crashed"):
             if not isinstance(getattr(self, name), bool):
-                raise InputError(option(name), repr(getattr(self, name))[:40], "must be True or False",
+                raise InputError(Field(name), repr(getattr(self, name))[:40], "must be True or False",
                                  "give a bool")
         for name in ("suite", "backend", "traffic", "scoring"):
             v = getattr(self, name)
             if not isinstance(v, str):
-                raise InputError(option(name), repr(v)[:40], f"must be a string, not {type(v).__name__}",
+                raise InputError(Field(name), repr(v)[:40], f"must be a string, not {type(v).__name__}",
                                  "give its name")
         t = self.agent_timeout
         if t is not None and (isinstance(t, bool) or not isinstance(t, (int, float))):
-            raise InputError("--agent-timeout", repr(t)[:40], "must be a number of seconds or None",
+            raise InputError(Field("agent_timeout"), repr(t)[:40], "must be a number of seconds or None",
                              "give e.g. 60, or None for no limit")
-        lists = {"families": "--family", "guards": "--guard", "replace_agents": "--replace-agent"}
-        for name, flag in lists.items():
+        for name in ("families", "guards", "replace_agents"):
             values = getattr(self, name)
             if not isinstance(values, tuple) or not all(isinstance(v, str) for v in values):
-                raise InputError(flag, repr(values)[:60], "must be names (strings)",
+                raise InputError(Field(name), repr(values)[:60], "must be names (strings)",
                                  "give a name or a list of names")
 

@@ -8,10 +8,11 @@ import sys
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 from ..agents.base import Agent
 from ..convert import CONVERTER_VERSION, ConvertOptions, convert_routes, safe_name
-from ..errors import InputError, check_seed, expect
+from ..errors import Field, InputError, check_seed, expect
 from ..fsio import OutFolder, dumps_json, read_json, write_atomic
 from ..guards.base import guarded_name
 from ..instructions.baseline_bank import BaselineBank, load_baseline_bank
@@ -22,6 +23,9 @@ from ..routes import check_route_selection, route_ids, suite_file
 from ..scenario import find_scenarios, read_scenario
 from ..vocab import CONTROL_FAMILIES, variants_of
 from .options import EvalOptions
+
+#: a skipped route's line, or its InputError
+Reason = TypeVar("Reason", str, InputError)
 
 
 @dataclass(frozen=True)
@@ -40,7 +44,7 @@ class Job:
     instructions: str
     device: str | None = None
     factory: Callable[[], Agent] | None = field(default=None, compare=False)
-    #: the scoring rules (:data:`icrsumo.metrics.SCORINGS`) of the stored record
+    #: the scoring rules (:data:`icrsumo.scoring.SCORINGS`) of the stored record
     scoring: str = "lb1"
     #: the instruction guard's spec ("" for none) and, where the workers cannot build it from
     #: the spec (an LLM guard bound to the out folder), its factory
@@ -114,9 +118,10 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None,
     compared["baseline_bank_sha256"] = bank.sha256 if bank is not None else None
     path = out / "config.json"
     if path.is_file():
-        old = read_json(path, "evaluation configuration", "restore it, or use another --out folder")
+        restore = f"restore it, or use another {Field('out')} folder"
+        old = read_json(path, "evaluation configuration", restore)
         if not isinstance(old, dict):
-            raise InputError(path, "", "is not a JSON object", "restore it, or use another --out folder")
+            raise InputError(path, "", "is not a JSON object", restore)
         check_run(out, old, run)
         diff = [k for k in compared if old.get(k) != compared[k]]
         history = old.get("k_grown_from")
@@ -127,20 +132,21 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None,
             config["k_grown_from"] = grown
         if diff:
             shown = ", ".join(f"{k}={old.get(k)!r} (now {compared[k]!r})" for k in diff)
-            fix = "use another --out folder, or the same options"
+            fix = f"use another {Field('out')} folder, or the same options"
             if diff == ["k"]:
-                fix = (f"use --k {old.get('k')} or more (a larger --k adds the missing variants), or "
-                       "another --out folder")
+                k = Field("k")
+                fix = (f"use {k} {old.get('k')} or more (a larger {k} adds the missing variants), or "
+                       f"another {Field('out')} folder")
             if "converter" in diff:
                 fix = ("its scenarios were converted by an earlier icrsumo, whose background traffic "
                        "differs (docs/fidelity.md, class F), so new episodes would not be comparable: "
-                       "run again into another --out folder")
+                       f"run again into another {Field('out')} folder")
             elif "scoring" in diff and old.get("scoring") is None:
                 fix = ("its episodes were scored before icrsumo scored by the leaderboard's own rules: "
-                       "run them again into another --out folder")
+                       f"run them again into another {Field('out')} folder")
             elif diff == ["scoring"]:
-                fix = (f"use another --out folder, or --scoring {old.get('scoring')}; icrsumo report OUT "
-                       f"--scoring {opts.scoring} rescores the stored episodes")
+                fix = (f"use another {Field('out')} folder, or {Field('scoring')} {old.get('scoring')}; "
+                       f"icrsumo report OUT --scoring {opts.scoring} rescores the stored episodes")
             raise InputError(out, "config.json", f"holds results of a different configuration: {shown}", fix)
         if isinstance(old.get("agents"), dict):
             config["agents"] = dict(old["agents"])
@@ -159,7 +165,7 @@ def read_config(out: Path) -> dict:
             why = "is a folder, not a file" if need.is_dir() else "is missing" if not need.exists() \
                 else "cannot be read (a broken link?)"
             raise InputError(need, "", f"{why}: {out} is not an evaluation folder",
-                             "pass the --out folder of icrsumo evaluate")
+                             f"pass the {Field('out')} folder of icrsumo evaluate")
     cfg = read_json(cfg_path, "evaluation configuration", "restore it from a copy")
     fix = "restore it from a copy"
     expect(cfg, dict, cfg_path, "", "the configuration", fix)
@@ -171,8 +177,9 @@ def read_config(out: Path) -> dict:
     return cfg
 
 
-def _resolve_suite(opts: EvalOptions, out: Path) -> tuple[Path, list[str]]:
-    """The folder of converted scenarios for ``opts.suite`` (converting into OUT/scenarios)."""
+def _resolve_suite(opts: EvalOptions, out: Path) -> tuple[Path, list[InputError]]:
+    """The folder of converted scenarios for ``opts.suite`` (converting into OUT/scenarios) and
+    the errors of the routes that failed."""
     p = Path(opts.suite)
     if p.is_dir() and (p / "index.json").is_file():
         return p, []
@@ -184,19 +191,19 @@ def _resolve_suite(opts: EvalOptions, out: Path) -> tuple[Path, list[str]]:
     report = convert_routes(routes, target, ConvertOptions(coords=coords, traffic=opts.traffic,
                                                            workers=opts.workers),
                             refuse_empty=not (out / "results.sqlite").exists())
-    return target, list(report.failures)
+    return target, list(report.errors)
 
 
 def _check_selection(opts: EvalOptions) -> None:
     """``routes`` and ``rollout_route`` checked against the suite's route file before anything
     is converted: a mistyped id fails at once, not after the whole suite has been converted."""
-    path = suite_file(opts.suite, "--suite", folders=True)
+    path = suite_file(opts.suite, folders=True)
     if path is None or not (opts.routes or opts.rollout_route):
         return
     ids = route_ids(path)
-    check_route_selection(opts.routes or (), ids, "--routes", opts.suite)
+    check_route_selection(opts.routes or (), ids, Field("routes"), opts.suite)
     if opts.rollout_route is not None:
-        check_route_selection([opts.rollout_route], opts.routes or ids, "--rollout-route", opts.suite)
+        check_route_selection([opts.rollout_route], opts.routes or ids, Field("rollout_route"), opts.suite)
 
 
 def prepare_suite(opts: EvalOptions, agents: Mapping[str, dict] | None = None,
@@ -225,26 +232,27 @@ def prepare_suite(opts: EvalOptions, agents: Mapping[str, dict] | None = None,
             families=FAMILIES + tuple(f for f in CONTROL_FAMILIES if f in opts.families), k=opts.k,
             seed=opts.seed, workers=1, baseline_bank=bank, grown_from=tuple(config.get("k_grown_from", ()))))
         if not written and not (out / "results.sqlite").exists():  # (with a store: run checks it)
-            lines = list(skipped) + list(failures)
-            raise InputError.of_line(lines[0]) if lines else no_routes(opts)
+            errors = list(skipped) + list(failures)
+            raise errors[0] if errors else no_routes(opts)
         for rid in opts.routes or ():  # a selected route that was skipped: its own reason
             why = skip_reason((*skipped, *failures), rid) if rid not in written else None
             if why is not None:
-                raise InputError.of_line(why)
+                raise why
         check_route_ids(opts, written)
         out.mkdir(parents=True, exist_ok=True)
         write_atomic(out / "config.json", dumps_json(config))
     except BaseException:
         before.undo()
         raise
-    return PreparedSuite(scenarios, instr_dir, tuple(written), tuple(skipped) + tuple(failures))
+    return PreparedSuite(scenarios, instr_dir, tuple(written),
+                         tuple(err.line() for err in (*skipped, *failures)))
 
 
-def skip_reason(lines: Iterable[str], route_id: str) -> str | None:
-    """The first of the skipped-route ``lines`` that names ``route_id`` (as a word or a path
-    part), if any."""
+def skip_reason(lines: Iterable[Reason], route_id: str) -> Reason | None:
+    """The first of the skipped-route ``lines`` (or their InputErrors) that names ``route_id``
+    (as a word or a path part), if any."""
     named = re.compile(rf"(^|[/ ']){re.escape(route_id)}([/ ':,]|$)")
-    return next((line for line in lines if named.search(line)), None)
+    return next((line for line in lines if named.search(str(line))), None)
 
 
 def no_routes(opts: EvalOptions) -> InputError:
@@ -260,12 +268,12 @@ def check_route_ids(opts: EvalOptions, routes: Iterable[str]) -> None:
     shown = ", ".join(have[:8]) + (", ..." if len(have) > 8 else "")
     missing = sorted(set(opts.routes or ()) - set(have))
     if missing:
-        raise InputError("--routes", missing[0], "no such route in the suite",
+        raise InputError(Field("routes"), missing[0], "no such route in the suite",
                          f"use route ids of the suite: {shown}")
     chosen = set(opts.routes or have)
     if opts.rollout_route is not None and opts.rollout_route not in chosen:
-        raise InputError("--rollout-route", opts.rollout_route, "not a route of this evaluation",
-                         f"use one of {shown}" if not opts.routes else "use one of the --routes")
+        raise InputError(Field("rollout_route"), opts.rollout_route, "not a route of this evaluation",
+                         f"use one of {shown}" if not opts.routes else f"use one of the {Field('routes')}")
 
 
 def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mapping[str, str],

@@ -17,11 +17,11 @@ from ..agents.registry import (
     agent_name,
     python_agent,
 )
-from ..errors import InputError, display_url, short, visible
+from ..errors import Field, InputError, display_url, short, visible
 from ..fsio import FolderLock
 from ..guards.base import guarded_fingerprint, guarded_name
 from ..instructions.families import ALL_FAMILIES, FAMILIES
-from ..metrics import SCORINGS, score_episode, scoring_names
+from ..scoring import SCORINGS, score_episode, scoring_names
 from ..store import ResultStore
 from ..types import EpisodeRecord
 from ..vocab import EpisodeStatus, ErrorKind, OutcomeStatus
@@ -175,10 +175,11 @@ def identify_agents(factories: Mapping[str, Callable], replacing: tuple[str, ...
         name = names[spec] = check_name(agent_name(spec, factory), "agent", spec)
         fp = fingerprint(factory)
         if name in fps and fps[name] != fp:
-            raise InputError("--agent", spec, f"is named {name!r}, as {first[name]} is, but is another agent "
+            raise InputError(Field("agents"), spec,
+                             f"is named {name!r}, as {first[name]} is, but is another agent "
                              f"(fingerprint {short(fp)}, not {short(fps[name])})",
                              "give one of them another name (the class's name attribute), or evaluate them "
-                             "into separate --out folders")
+                             f"into separate {Field('out')} folders")
         fps.setdefault(name, fp)
         first.setdefault(name, spec)
     gnames: dict[str, str] = {}
@@ -186,14 +187,14 @@ def identify_agents(factories: Mapping[str, Callable], replacing: tuple[str, ...
         gname = gnames[gspec] = check_name(guard_name(gspec, gfactory), "guard", gspec)
         other = next((s for s, n in gnames.items() if n == gname and s != gspec), None)
         if other is not None:
-            raise InputError("--guard", gspec, f"is named {gname!r}, as {other} is",
+            raise InputError(Field("guards"), gspec, f"is named {gname!r}, as {other} is",
                              "give one of them another name (the guard class's name attribute)")
         gfp = fingerprint(gfactory)
         for name in list(dict.fromkeys(names.values())):
             fps[guarded_name(name, gname)] = guarded_fingerprint(fps[name], gfp)
     for name in replacing:
         if name not in fps:
-            raise InputError("--replace-agent", name, "is not an agent of this run",
+            raise InputError(Field("replace_agents"), name, "is not an agent of this run",
                              f"name one of {', '.join(sorted(fps))}")
     return AgentIds(names, fps, tuple(first.values()), gnames)
 
@@ -341,7 +342,7 @@ def run_queue(queue: list[Job], opts: EvalOptions, store: ResultStore, progress:
 
 def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> dict:
     """Rebuild summary, tables and figures of an evaluation folder from its store (no SUMO);
-    returns the summary. With ``scoring`` (a name of :data:`icrsumo.metrics.SCORINGS`) every
+    returns the summary. With ``scoring`` (a name of :data:`icrsumo.scoring.SCORINGS`) every
     finished episode is rescored from its stored log by those rules (the store is left as it
     is; the summary names the scoring); without, the stored scores are reported.
     The report owns the folder while it writes (:class:`icrsumo.fsio.FolderLock`): a run still
@@ -350,7 +351,7 @@ def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> d
     out = Path(out)
     read_config(out)  # an InputError for a folder that is no evaluation's, before the lock
     if scoring is not None and scoring not in SCORINGS:
-        raise InputError("--scoring", scoring, "unknown scoring", f"use {', '.join(scoring_names())}")
+        raise InputError(Field("scoring"), scoring, "unknown scoring", f"use {', '.join(scoring_names())}")
     with FolderLock(out, busy_fix="wait for it to end (an evaluation writes its reports when it ends), "
                     "then report again"):
         return _report_locked(out, quiet, scoring)
@@ -367,7 +368,7 @@ def _report_locked(out: Path, quiet: bool, scoring: str | None) -> dict:
             records, inexact = rescore(store, records, scoring)
         elif stored_scoring is None:
             raise InputError(cfg_path, "scoring", "its episodes were scored before icrsumo scored by the "
-                             "leaderboard's own rules", "run them again into another --out folder")
+                             "leaderboard's own rules", f"run them again into another {Field('out')} folder")
         families = tuple(f for f in ALL_FAMILIES if any(r.family == f for r in records))
         agents = tuple(sorted({r.agent for r in records}))
         # episodes the tables cannot hold (an attack's searches and transfers): counted and named
@@ -395,13 +396,12 @@ def _not_in_tables(families: list[str]) -> str:
 def rescore(store: ResultStore, records: list[EpisodeRecord],
             scoring: str) -> tuple[list[EpisodeRecord], int]:
     """``records`` with every finished episode scored again from its stored log under
-    ``scoring`` (:func:`icrsumo.metrics.score_episode`), and how many of them ended, under the
+    ``scoring`` (:func:`icrsumo.scoring.score_episode`), and how many of them ended, under the
     rules they were recorded with, before ``scoring``'s rules would have ended them (those are
     scored on what was recorded; a fresh run with ``scoring`` would have simulated longer).
     Crashed episodes stay as they are. An InputError names a finished episode whose log is
     missing or cannot be read (a rescored report never drops one silently)."""
-    from ..metrics import ended_by
-    from ..termination import ROUTE_RULES
+    from ..scoring import get_scoring
     from .execute import with_scores
 
     out, short = [], 0
@@ -411,8 +411,8 @@ def rescore(store: ResultStore, records: list[EpisodeRecord],
             if log is None:
                 raise InputError(store.path, f"episode {r.agent}/{r.route_id}/{r.family}/{r.k}",
                                  "has no stored log to rescore",
-                                 "run the evaluation again into another --out folder")
+                                 f"run the evaluation again into another {Field('out')} folder")
             r = with_scores(r, score_episode(log, scoring))
-            short += not ended_by(log, ROUTE_RULES[scoring])[1]
+            short += not get_scoring(scoring).ended_by(log)[1]
         out.append(r)
     return out, short

@@ -19,8 +19,12 @@ from pathlib import Path
 from typing import Any
 
 from ..agents.llm import Asker, LLMSettings, api_key, bound, check_server, parse_spec, with_format
+from ..errors import Field
 from ..vocab import Verdict
 from .base import GuardContext, GuardInfo
+
+#: the field an llm guard's spec is given by (for messages)
+GUARDS_FIELD = Field("guards")
 
 #: bumped when the question changes (part of the fingerprint)
 PROMPT_VERSION = "1"
@@ -78,7 +82,7 @@ class LLMGuard:
     def __init__(self, settings: LLMSettings) -> None:
         self.settings = settings
         self.name = f"llm:{settings.model}"
-        self.asker = Asker(settings, api_key(settings, "--guard"))
+        self.asker = Asker(settings, api_key(settings, GUARDS_FIELD))
 
     def reset(self, info: GuardInfo) -> None:  # noqa: ARG002 - answers are cached across episodes
         return None
@@ -117,11 +121,11 @@ class LLMGuardFactory:
 
     def bind(self, out: Path) -> LLMGuardFactory:
         """A factory whose guards keep their answers in ``out/llm-cache`` (:func:`bound`)."""
-        return LLMGuardFactory(bound(self.settings, out, "--guard"))
+        return LLMGuardFactory(bound(self.settings, out, GUARDS_FIELD))
 
     def __call__(self) -> LLMGuard:
         if not self._checked:
-            check_server(self.settings, False, "--guard")
+            check_server(self.settings, False, GUARDS_FIELD)
             self._checked = True
         return LLMGuard(self.settings)
 
@@ -129,4 +133,4 @@ class LLMGuardFactory:
 def llm_guard_factory(spec: str) -> LLMGuardFactory:
     """The factory of an ``llm:MODEL@URL`` guard spec (no network: :meth:`LLMGuardFactory.bind`
     checks the server)."""
-    return LLMGuardFactory(parse_spec(spec, "--guard"))
+    return LLMGuardFactory(parse_spec(spec, GUARDS_FIELD))

@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from ..agents.registry import AgentRegistry, register_plugins
-from ..errors import InputError
+from ..errors import Field, InputError
 from .base import Guard, guarded_name
 
 __all__ = ["GUARDS", "GuardRegistry", "guard_factory", "guard_name", "guarded_name"]
@@ -23,7 +23,7 @@ class GuardRegistry(AgentRegistry):
     """Registered guard names -> their classes (see :class:`icrsumo.agents.registry.AgentRegistry`)."""
 
     kind = "guard"
-    option = "--guard"
+    option = Field("guards")
 
 
 #: the process's guard registry
@@ -39,13 +39,13 @@ def guard_factory(spec: str) -> Callable[[], Guard]:
     """A zero-argument factory of fresh guards for ``spec`` (a registered name or
     ``llm:MODEL@URL``); an InputError for an unknown name, before any episode runs."""
     if not isinstance(spec, str) or not spec:
-        raise InputError("--guard", repr(spec), "not a guard name", f"use one of {', '.join(GUARDS)}")
+        raise InputError(Field("guards"), repr(spec), "not a guard name", f"use one of {', '.join(GUARDS)}")
     if spec.startswith(LLM_GUARD_PREFIX):
         from .llm import llm_guard_factory
 
         return llm_guard_factory(spec)
     if spec not in GUARDS:
-        raise InputError("--guard", spec, "unknown guard",
+        raise InputError(Field("guards"), spec, "unknown guard",
                          f"use one of {', '.join(GUARDS)}, llm:MODEL@URL, or install a plugin that adds it")
     return GUARDS[spec]
 

@@ -21,8 +21,7 @@ def junction_branches(scenario: Scenario, net: RoadNet,
                       maneuvers: Sequence[Maneuver]) -> dict[int, tuple[Intent, ...]]:
     """Maneuver index -> the intents the road offers at its junction (from the edge the route
     enters it on: every connection's direction), for the junction maneuvers."""
-    entries = {(j["junction"], round(float(j["pos"]), 2)): j["from_edge"]
-               for j in scenario.manifest["junctions"]}
+    entries = {(j.junction, round(j.pos, 2)): j.from_edge for j in scenario.route.junctions}
     out = {}
     for i, m in enumerate(maneuvers):
         edge = entries.get((m.junction_id, round(float(m.pos), 2)))

@@ -18,7 +18,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import InputError, expect, short
+from ..errors import Field, InputError, expect, short
 from ..fsio import read_json
 from ..resources import data_dir
 from ..types import Intent
@@ -112,7 +112,7 @@ def _unknown(path: Path, place: str, d: dict, allowed, what: str = "key") -> Non
 
 def _load(path: Path, family: str | None) -> dict:
     if not path.exists():
-        raise InputError(path, "", "template bank missing", "add the file or drop --templates")
+        raise InputError(path, "", "template bank missing", f"add the file or drop {Field('templates')}")
     data = read_json(path, "template bank", "")
     expect(data, dict, path, "top level", "a template bank", _FIX)
     _unknown(path, "", data, _TOP_KEYS[family or "baseline"])
@@ -351,7 +351,7 @@ def load_banks(folder: Path | None = None) -> Banks:
     """Load and validate every bank in ``folder`` (default: the bundled ``templates/``)."""
     folder = Path(folder) if folder is not None else data_dir("templates")
     if not folder.is_dir():
-        raise InputError(folder, "", "template folder not found", "check the --templates path")
+        raise InputError(folder, "", "template folder not found", f"check the {Field('templates')} path")
     baseline = _load_baseline(folder)  # each file is validated (and so readable) before it is hashed
     paraphrase = _load_intent_bank(folder, "paraphrase")
     misleading = _load_intent_bank(folder, "misleading")

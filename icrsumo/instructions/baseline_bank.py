@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
-from ..errors import InputError
+from ..errors import Field, InputError
 from ..fsio import check_surrogates, no_constants, no_duplicates
 from ..types import Intent
 from .banks import BASELINE_TYPES, ORDINALS
@@ -221,7 +221,7 @@ def _fail(path: Path, place: str, problem: str, fix: str) -> InputError:
 def _read(path: Path) -> tuple[bytes, str]:
     """The file's bytes and its text (UTF-8, an optional BOM)."""
     if not path.exists():
-        raise _fail(path, "", "baseline bank not found", "check the --baseline-bank path")
+        raise _fail(path, "", "baseline bank not found", f"check the {Field('baseline_bank')} path")
     if not path.is_file():
         raise _fail(path, "", "is not a file", "pass LMDrive's instruction_dict.json (a JSON file)")
     size = path.stat().st_size

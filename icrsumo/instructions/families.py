@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import Field, InputError
 from ..types import Instruction, InstructionSet, Intent
 from ..vocab import ALL_FAMILIES, FAMILIES, Family, variants_of
 from .banks import CONTRADICTS, Banks, Entry, baseline_catalogue, fill
@@ -51,7 +51,7 @@ def _draw(rng: np.random.Generator, n: int, k: int, what: str,
     if k > len(avail):
         left = f"{len(avail)} unused" if used else str(n)
         raise InputError(what, "", f"bank has {left} entries, cannot draw K={k} without replacement",
-                         f"lower --k to {len(avail) + len(used) if used else n} or add entries")
+                         f"lower {Field('k')} to {len(avail) + len(used) if used else n} or add entries")
     return [avail[int(i)] for i in rng.choice(len(avail), size=k, replace=False)]
 
 

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..convert import safe_name
-from ..errors import InputError, check_seed
+from ..errors import Field, InputError, check_seed
 from ..fsio import check_out_dir, dumps_json, write_atomic
 from ..networks import load_net
 from ..procs import spawn_context
@@ -59,19 +59,19 @@ class GenerateOptions:
     def check(self) -> None:
         bad = [f for f in self.families if f not in ALL_FAMILIES]
         if bad or not self.families:
-            raise InputError("--families", "", f"unknown family {bad[0] if bad else '(none)'}",
+            raise InputError(Field("families"), "", f"unknown family {bad[0] if bad else '(none)'}",
                              f"use some of {', '.join(ALL_FAMILIES)}")
         if not 1 <= self.k <= 64:
-            raise InputError("--k", "", f"K={self.k} out of range", "use 1 to 64 (default 8)")
+            raise InputError(Field("k"), "", f"K={self.k} out of range", "use 1 to 64 (default 8)")
         if self.workers < 1:
-            raise InputError("--workers", "", "must be at least 1", "give a positive count")
+            raise InputError(Field("workers"), "", "must be at least 1", "give a positive count")
         ks = (*self.grown_from, self.k)
         if any(a >= b for a, b in zip(ks, ks[1:])) or min(ks) < 1:
             grown = ", ".join(map(str, self.grown_from))
-            raise InputError("--k", str(self.k), f"cannot grow from K = {grown}",
-                             "give a larger --k than the folder's")
+            raise InputError(Field("k"), str(self.k), f"cannot grow from K = {grown}",
+                             f"give a larger {Field('k')} than the folder's")
         if self.grown_from and self.llm is not None:
-            raise InputError("--k", str(self.k), "a folder's K grows with the template banks only",
+            raise InputError(Field("k"), str(self.k), "a folder's K grows with the template banks only",
                              "generate the larger K into another folder")
         check_seed(self.seed)
 
@@ -93,7 +93,7 @@ def grow_rng(seed: int, route_id: str, k_old: int, k_new: int) -> np.random.Gene
 
 def _highway_spans(sc: Scenario, net) -> tuple[tuple[float, float], ...]:
     """(start, end) route positions (m) of the route's highway edges."""
-    cuts = [0.0] + [float(j["pos"]) for j in sc.manifest["junctions"]] + [sc.length]
+    cuts = [0.0] + [j.pos for j in sc.route.junctions] + [sc.length]
     return tuple((cuts[i], cuts[i + 1]) for i, e in enumerate(sc.ego_edges)
                  if i + 1 < len(cuts) and is_highway(net, e))
 
@@ -142,32 +142,34 @@ def generate_route(scenario_dir: Path, opts: GenerateOptions) -> tuple[str, dict
             **({"grown_from": list(opts.grown_from)} if opts.grown_from else {}),
             "generator": generator, "layout": LAYOUT_VERSION, "banks_sha256": banks.sha256,
             **({"baseline_bank_sha256": user.sha256} if user is not None else {}),
-            "scenario_hash": sc.manifest.get("source_hash", "")}
+            "scenario_hash": sc.source_hash}
     return sc.route_id, route_document(baseline, variants, maneuvers, meta)
 
 
-def _job(args: tuple[str, GenerateOptions]) -> tuple[str, str, str]:
+def _job(args: tuple[str, GenerateOptions]) -> tuple[str, str, str | InputError]:
+    """("ok", route id, its document's JSON) or ("failed", folder, the InputError)."""
     d, opts = args
     try:
         rid, doc = generate_route(Path(d), opts)
         return "ok", rid, dumps_json(doc)
     except InputError as err:
-        return "failed", d, err.line()
+        return "failed", d, err
     except Exception as err:  # an LLM route that failed after its retries
         from .llm import LLMError
 
         if isinstance(err, LLMError):
             return "failed", d, InputError(d, "LLM", " ".join(str(err).split())[:300],
-                                           "check --endpoint and --model, and that the server answers").line()
+                                           f"check {Field('endpoint')} and {Field('model')}, and that the "
+                                           "server answers")
         raise
 
 
 def generate(scenarios: Path, out: Path, opts: GenerateOptions,
-             refuse_empty: bool = False) -> tuple[list[str], list[str]]:
+             refuse_empty: bool = False) -> tuple[list[str], list[InputError]]:
     """Write ``OUT/<route>.json`` per route and ``OUT/index.json``; returns (route ids written,
-    failure lines). Template banks are validated before any route is touched. With
-    ``refuse_empty``, a run in which no route could be generated writes nothing and raises the
-    first route's InputError."""
+    the InputError of every route that failed: ``str(err)`` is its line). Template banks are
+    validated before any route is touched. With ``refuse_empty``, a run in which no route could
+    be generated writes nothing and raises the first route's InputError."""
     opts.check()
     scenarios = Path(scenarios)
     check_out_dir(Path(out))
@@ -192,7 +194,7 @@ def generate(scenarios: Path, out: Path, opts: GenerateOptions,
     else:
         results = [_job(j) for j in jobs]
     if refuse_empty and results and all(status != "ok" for status, _, _ in results):
-        raise InputError.of_line(results[0][2])  # nothing to write: the (first) reason
+        raise results[0][2]  # nothing to write: the (first) reason
     written, failures, index = [], [], []
     for status, rid, payload in results:
         if status != "ok":
@@ -204,7 +206,8 @@ def generate(scenarios: Path, out: Path, opts: GenerateOptions,
         index.append({"route_id": rid, "file": name})
     write_atomic(Path(out) / "index.json", dumps_json({
         "format": FORMAT.replace("instructions", "instruction-index"), "seed": opts.seed,
-        "k": opts.k, "families": list(opts.families), "routes": index, "failures": failures,
+        "k": opts.k, "families": list(opts.families), "routes": index,
+        "failures": [err.line() for err in failures],
         **({"baseline_bank": user.describe()} if user is not None else {}),
     }))
     return written, failures

@@ -12,16 +12,13 @@ from collections.abc import Callable
 
 import numpy as np
 
+from .lexicon import QWERTY_NEIGHBOURS
+
 _PROTECTED = re.compile(r"\[x\]")
 _WORD = re.compile(r"[A-Za-z]{3,}")
 
-#: QWERTY neighbours of each letter
-KEYBOARD_NEIGHBOURS: dict[str, str] = {
-    "q": "wa", "w": "qeas", "e": "wrsd", "r": "etdf", "t": "ryfg", "y": "tugh", "u": "yihj",
-    "i": "uojk", "o": "ipkl", "p": "ol", "a": "qwsz", "s": "awedxz", "d": "serfcx", "f": "drtgvc",
-    "g": "ftyhbv", "h": "gyujnb", "j": "huikmn", "k": "jiolm", "l": "kop", "z": "asx",
-    "x": "zsdc", "c": "xdfv", "v": "cfgb", "b": "vghn", "n": "bhjm", "m": "njk",
-}
+#: QWERTY neighbours of each letter (the classifier's spelling table)
+KEYBOARD_NEIGHBOURS: dict[str, str] = QWERTY_NEIGHBOURS
 
 
 def _segments(text: str) -> list[tuple[str, bool]]:

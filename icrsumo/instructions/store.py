@@ -6,8 +6,8 @@ from __future__ import annotations
 from dataclasses import asdict
 from pathlib import Path
 
+from ..doccheck import DocChecker
 from ..fsio import read_json_doc
-from ..scenario import DocChecker
 from ..types import Instruction, InstructionSet, Intent, Maneuver, Notice
 from ..vocab import Family
 from .intent import classify_intent
@@ -59,7 +59,7 @@ def _instruction(c: DocChecker, d: object, place: str) -> Instruction:
         id=c.integer(c.key(d, "id", place), f"{place}.id", 0),
         trigger=c.number(c.key(d, "trigger", place), f"{place}.trigger", 0.0),
         text=c.string(c.key(d, "text", place), f"{place}.text"),
-        intent=Intent(c.choice(c.key(d, "intent", place), f"{place}.intent", Intent, "intent")),
+        intent=c.member(c.key(d, "intent", place), f"{place}.intent", Intent, "intent"),
         type=c.string(c.key(d, "type", place), f"{place}.type"),
         distance=_opt_number(c, d, "distance", place),
         maneuver_pos=_opt_number(c, d, "maneuver_pos", place),
@@ -77,7 +77,7 @@ def _notice(c: DocChecker, n: object, place: str) -> Notice:
         id=c.integer(c.key(n, "id", place), f"{place}.id", 0), trigger=trigger, end=end,
         text=c.string(c.key(n, "text", place), f"{place}.text"),
         type=c.string(c.key(n, "type", place), f"{place}.type"),
-        intent=Intent(c.choice(n.get("intent", "unknown"), f"{place}.intent", Intent, "intent")),
+        intent=c.member(n.get("intent", "unknown"), f"{place}.intent", Intent, "intent"),
     )
 
 
@@ -122,7 +122,7 @@ def read_route_file(path: Path) -> tuple[list[InstructionSet], tuple[Maneuver, .
     for si, s in enumerate(c.lst(c.key(doc, "sets"), "sets", 1)):
         place = f"sets[{si}]"
         s = c.obj(s, place)
-        family = Family(c.choice(c.key(s, "family", place), f"{place}.family", Family, "family"))
+        family = c.member(c.key(s, "family", place), f"{place}.family", Family, "family")
         k = c.integer(c.key(s, "k", place), f"{place}.k", 0)
         if (si == 0) != (family == Family.BASELINE):
             raise c.fail(f"{place}.family", "the first set must be the baseline" if si == 0

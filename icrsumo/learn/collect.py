@@ -47,7 +47,7 @@ import numpy as np
 from ..agents.base import Action, Observation
 from ..agents.privileged import RouteOracle
 from ..convert import ConvertOptions, convert_routes, safe_name
-from ..errors import InputError, check_seed, expect
+from ..errors import Field, InputError, check_seed, expect
 from ..fsio import OutFolder, dumps_json, read_json_doc, write_atomic
 from ..instructions.banks import load_banks
 from ..instructions.generate import baseline_set
@@ -88,18 +88,19 @@ class CollectOptions:
 
     def check(self) -> None:
         if self.suite in EVAL_SPLITS or _is_eval_file(self.suite):
-            raise InputError("--suite", self.suite, "is an evaluation split",
+            raise InputError(Field("suite"), self.suite, "is an evaluation split",
                              "collect from the train split (the default), carla-train or "
                              "carla-focus (CARLA's towns) or your own routes")
         if not 1 <= self.passes <= 32:
-            raise InputError("--passes", "", f"{self.passes} out of range", "use 1 to 32")
+            raise InputError(Field("passes"), "", f"{self.passes} out of range", "use 1 to 32")
         if not 1 <= self.every <= 50:
-            raise InputError("--every", "", f"{self.every} out of range", "use 1 to 50")
+            raise InputError(Field("every"), "", f"{self.every} out of range", "use 1 to 50")
         if self.workers < 1:
-            raise InputError("--workers", "", "must be at least 1", "give a positive count")
+            raise InputError(Field("workers"), "", "must be at least 1", "give a positive count")
         check_seed(self.seed)
         if self.limit < 0:
-            raise InputError("--limit", "", f"{self.limit} is negative", "give a route count >= 0 (0: all)")
+            raise InputError(Field("limit"), "", f"{self.limit} is negative",
+                             "give a route count >= 0 (0: all)")
         if self.driver:
             self._check_driver()
 
@@ -112,7 +113,7 @@ class CollectOptions:
         cls = BUILTIN.get(self.driver)
         if cls is not None:
             if getattr(cls, "privileged", False):
-                raise InputError("--driver", self.driver, "is a privileged agent (it needs the "
+                raise InputError(Field("driver"), self.driver, "is a privileged agent (it needs the "
                                  "simulator's state, which a driver does not see)",
                                  "give a learned agent or a checkpoint")
             return
@@ -354,22 +355,23 @@ def collect(opts: CollectOptions, out: Path, quiet: bool = False) -> dict:
     opts.check()
     out = Path(out)
     if out.exists() and not out.is_dir():
-        raise InputError(out, "", "exists and is not a folder", "give a new or an earlier --out folder")
+        raise InputError(out, "", "exists and is not a folder",
+                         f"give a new or an earlier {Field('out')} folder")
     config = {k: v for k, v in asdict(opts).items() if k not in ("workers",)}
     manifest_path = out / "collect.json"
     if manifest_path.exists():
         old = read_json_doc(manifest_path, COLLECT_FORMAT, "collect manifest",
-                           "use another --out folder, or delete the damaged collect.json and rerun with "
-                           "the same options (finished episodes are kept)").get("config", {})
+                           f"use another {Field('out')} folder, or delete the damaged collect.json and "
+                           "rerun with the same options (finished episodes are kept)").get("config", {})
         if old != config:
             raise InputError(manifest_path, "config", "holds data of a different configuration",
-                             "use another --out folder, or the same options")
+                             f"use another {Field('out')} folder, or the same options")
     before = OutFolder.before(out)
     try:
         dirs = find_scenarios(_scenarios(opts, out))
         if not dirs:
             raise InputError(opts.suite, "", "no scenario to collect from (no route converted)",
-                             "fix the routes named above, or give another --suite")
+                             f"fix the routes named above, or give another {Field('suite')}")
     except InputError:
         before.undo()  # refused before any driving: leave no half-made folder behind
         raise

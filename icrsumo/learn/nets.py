@@ -32,7 +32,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ..errors import InputError, expect
+from ..errors import Field, InputError, expect
 from ..fsio import unreadable
 from ..vocab import Intent
 from .config import _CHECKPOINT_FIX, MINILM_SHAPE, ModelConfig, config_from_dict
@@ -366,7 +366,7 @@ class Trainer:
         self.step = step
 
 
-_RESUME_FIX = "delete it to start over, or use another --out folder"
+_RESUME_FIX = f"delete it to start over, or use another {Field('out')} folder"
 
 
 def _first_line(err: BaseException) -> str:

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import Field as Named
 from ..errors import InputError, expect
 from ..fsio import dumps_json, read_json_doc, read_text, write_atomic
 from ..procs import spawn_context
@@ -78,15 +79,15 @@ class TrainConfig:
     variants: int = 24
     device: str = "auto"
 
-    def check(self, where: str | Path = "train config", sources: dict[str, str] | None = None,
+    def check(self, where: str | Path = "train config", sources: dict[str, Named] | None = None,
               places: dict[str, str] | None = None) -> None:
         """InputErrors for a value of the wrong type (from the field types), out of range, or a
         device that is unknown or not available here. ``where`` names the config (its file),
-        ``sources`` the command-line option a key came from (``{"steps": "--steps"}``) and
+        ``sources`` the field a key was given by instead (``{"steps": Named("steps")}``) and
         ``places`` where in the file each key is (``{"lr": "line 4 (lr)"}``)."""
         sources, places = sources or {}, places or {}
 
-        def loc(name: str) -> tuple[str, str]:
+        def loc(name: str) -> tuple[str | Path | Named, str]:
             if name in sources:
                 return sources[name], ""
             return str(where), places.get(name, name)
@@ -178,7 +179,7 @@ def read_config(path: Path, **overrides: object) -> TrainConfig:
     for key, value in overrides.items():
         if value is not None:
             raw[key] = value
-            sources[key] = "--" + key.replace("_", "-")
+            sources[key] = Named(key)
     for key, value in raw.items():  # integers given for float keys (lr = 1) are floats
         if _kind(known[key]) is float and isinstance(value, int) and not isinstance(value, bool):
             raw[key] = float(value)
@@ -225,7 +226,7 @@ def _episode_files(d: Path) -> list[Path]:
 
     fix = f"run icrsumo collect --out {d} first"
     if not d.exists():
-        raise InputError(d, "", "data folder not found", f"check the --data path, or {fix}")
+        raise InputError(d, "", "data folder not found", f"check the {Named('data')} path, or {fix}")
     if not d.is_dir():
         raise InputError(d, "", "is not a folder", "give the folder written by icrsumo collect --out DIR")
     manifest = d / "collect.json"
@@ -385,14 +386,14 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
     last = out / "last.pt"
     state = None
     if last.exists():
-        fix = "delete it to start over, or use another --out folder"
+        fix = f"delete it to start over, or use another {Named('out')} folder"
         state = nets.load(last, "training checkpoint", fix)
         if state.get("format") != nets.STATE_FORMAT:
             raise InputError(last, "format", f"not an icrsumo training checkpoint (format "
                              f"{str(state.get('format'))[:40]!r})", fix)
         if state.get("train_config") != cfg_doc:
             raise InputError(last, "train_config", "was written with a different config",
-                             "use another --out folder, or the same config")
+                             f"use another {Named('out')} folder, or the same config")
     rng = np.random.default_rng([cfg.seed, 1])
     t0 = time.perf_counter()
     say = functools.partial(_say, quiet=quiet)
@@ -429,7 +430,7 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
             rng.bit_generator.state = state.get("rng")
         except (TypeError, ValueError, KeyError):
             raise InputError(last, "rng", "not a random generator state", "delete it to start over, "
-                             "or use another --out folder") from None
+                             f"or use another {Named('out')} folder") from None
         if log_path.exists():  # drop lines past the checkpoint: they are about to be redone
             kept = _log_lines(log_path, trainer.step)
     try:

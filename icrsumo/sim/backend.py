@@ -85,7 +85,7 @@ def clear_start(ls, x: float, y: float, yaw: float, scenario: Scenario) -> list[
     their stopping distance (``START_REACTION`` s, then ``START_BRAKE`` m/s^2, + 2 m) or that
     overlap its footprint. Without this a car arriving at 13 m/s rear-ends the standing ego
     half a second into the episode. Returns the removed ids (sorted)."""
-    length = float(scenario.manifest["ego"]["length"])
+    length = scenario.ego.length
     c, s = math.cos(yaw), math.sin(yaw)
     gone = []
     for vid in sorted(ls.vehicle.getIDList()):

@@ -7,7 +7,7 @@ Per simulation step (``step_length`` s, 0.05 s = 20 Hz as the Leaderboard): the 
 bicycle model; the backend (:mod:`icrsumo.sim.backend`) places the ego in SUMO, steps and
 reads a :class:`~icrsumo.sim.frame.SimFrame`; the pure sensors (:mod:`icrsumo.sim.sensors`)
 turn it into events and readings; the step is recorded; the run-ending rules
-(:mod:`icrsumo.termination`) decide. Every ``control_every`` steps (default 2: 10 Hz) the
+(:mod:`icrsumo.scoring`) decide. Every ``control_every`` steps (default 2: 10 Hz) the
 agent gets an observation: BEV raster, speed, active instruction with ``[x]`` filled, notice
 (the surroundings are read, and the BEV rendered, only then). Instructions are issued online
 from the ego's progress: the active one is the last whose trigger (m) has been passed, the
@@ -33,8 +33,10 @@ from ..guards.stream import GuardedStream
 from ..networks import load_net
 from ..render import BevRenderer, BevSpec
 from ..scenario import Scenario
-from ..termination import MIN_TIMEOUT_LB2, ROUTE_RULES, DenseRoute, TerminationMonitor, route_timeout
-from ..types import EgoRoute, EpisodeLog, Event, InstructionSet, LanePos
+from ..scoring import get_scoring
+from ..scoring.criteria import TerminationMonitor
+from ..scoring.route import DenseRoute
+from ..types import EgoRoute, EpisodeLog, Event, InstructionSet
 from ..vocab import EventKind, Termination
 from .backend import SimulatorError, SumoBackend
 from .callbacks import EpisodeCallback, LogRecorder, StepRecord
@@ -51,7 +53,7 @@ CONTROL_EVERY = 2
 class RunOptions:
     """Episode options: agent rate (``control_every`` SUMO steps per agent decision), the
     BEV spec of the agent's raster (it changes what the agent sees, never the scoring) and the
-    scoring whose route criteria end the episode (:data:`icrsumo.termination.ROUTE_RULES`)."""
+    scoring whose route criteria end the episode (:data:`icrsumo.scoring.SCORINGS`)."""
 
     control_every: int = CONTROL_EVERY
     bev: BevSpec = BevSpec()
@@ -64,14 +66,9 @@ def _renderer(net_path: str, spec: BevSpec) -> BevRenderer:
 
 
 def ego_route(sc: Scenario) -> EgoRoute:
-    """The scenario's route as an :class:`EgoRoute` (what the route-oracle is handed)."""
-    m = sc.manifest
-    st, en = m["ego"]["start"], m["ego"]["end"]
-    return EgoRoute(
-        edges=tuple(m["ego"]["edges"]), lanes=tuple(tuple(x) for x in m["ego"]["lanes"]),
-        lane_path=tuple(m["ego"]["lane_path"]), start=LanePos(**st), end=LanePos(**en),
-        polyline=sc.polyline, length=sc.length, junctions=(), lane_changes=(),
-    )
+    """The scenario's route (:attr:`~icrsumo.scenario.Scenario.route`, its junction passes and
+    lane changes included): what the route-oracle is handed."""
+    return sc.route
 
 
 def _active(triggers: list[float], progress: float) -> int:
@@ -97,8 +94,7 @@ class Episode:
         self.scenario, self.instructions = scenario, instructions
         self.options, self.privileged, self.needs_route = options, privileged, needs_route
         self.net = net = load_net(scenario.net)
-        m = scenario.manifest
-        self.params = params = VehicleParams(length=float(m["ego"]["length"]), width=float(m["ego"]["width"]))
+        self.params = params = VehicleParams(length=scenario.ego.length, width=scenario.ego.width)
         #: the route polyline as the log stores it (m, rounded to 0.01; with the lane heading at
         #: each vertex, rad rounded to 1e-4, where the scenario has them) and its dense route
         heads = scenario.headings if len(scenario.headings) == len(scenario.polyline) else None
@@ -107,10 +103,11 @@ class Episode:
             + ((round(float(heads[i]), 4) + 0.0,) if heads else ())
             for i, (x, y) in enumerate(scenario.polyline))
         self.route = DenseRoute.from_polyline(self.polyline)
+        #: the route the route-oracle is handed (World.route)
         self.ego_route = ego_route(scenario)
         self.sensors = Sensors(net, driving_lanes(net), drivable_area(net), (params.length, params.width))
         self.renderer = _renderer(str(scenario.net), options.bev)
-        self.dt = float(m.get("step_length", 0.05))
+        self.dt = scenario.step_length
         self.instr = instructions.instructions
         self.triggers = [i.trigger for i in self.instr]
         self.texts = [i.rendered() for i in self.instr]
@@ -136,12 +133,10 @@ class Episode:
         self.monitor: TerminationMonitor | None = None
         self.action = Action(control=Control(brake=1.0))
         self._path: WaypointPath | None = None
-        self.rules = ROUTE_RULES[options.scoring]
-        # a bound on the steps (the monitor ends the episode first): 2.0's timeout grows with the
-        # route advance at 10 % of the speed limit (>= 1 m/s here)
-        budget = route_timeout(self.route.length) if self.rules.timeout == "route" else \
-            MIN_TIMEOUT_LB2 + self.route.length / 0.1
-        self.n_max = int((budget + 10.0) / self.dt) + 10
+        self.scoring = get_scoring(options.scoring)
+        self.rules = self.scoring.rules
+        # a bound on the steps (the monitor ends the episode first)
+        self.n_max = self.scoring.max_steps(self.route.length, self.dt)
         self.k_instr = -1
         #: the index of the instruction the agent is shown (k_instr, unless a guard blocked it)
         self.k_shown = -1
@@ -170,7 +165,7 @@ class Episode:
     @property
     def progress(self) -> float:
         """Route progress (m): the last point of the dense route passed
-        (:class:`~icrsumo.termination.TerminationMonitor`)."""
+        (:class:`~icrsumo.scoring.criteria.TerminationMonitor`)."""
         return self.monitor.progress if self.monitor is not None else 0.0
 
     def _finish(self, termination: Termination, t: float) -> None:

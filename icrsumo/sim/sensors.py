@@ -5,11 +5,11 @@ network's geometry and SUMO's :class:`~icrsumo.sim.frame.SimFrame`. No libsumo, 
 * :class:`LaneHeading`: a lane's heading (rad) at a lane position;
 * :class:`Sensors.detect`: ``(state, frame, ego, pos) -> (events, state)``, the infraction
   events of one step (a contact event per actor on every step of contact, for the
-  leaderboard's collision rule in :mod:`icrsumo.metrics`; roadside from the drivable area's
+  leaderboard's collision rule in :mod:`icrsumo.scoring`; roadside from the drivable area's
   polygons (:mod:`icrsumo.sim.drivable`); red lights and stop signs at junction entry; wrong
   way) and the step's OutsideRouteLanesTest flags (:mod:`icrsumo.sim.lanes`) in a frozen
   :class:`SensorState`. Route progress is the run-ending monitor's
-  (:mod:`icrsumo.termination`).
+  (:mod:`icrsumo.scoring.criteria`).
 
 Infractions come from the network and SUMO's state only, never from what the agent sees.
 """
@@ -25,7 +25,8 @@ import numpy as np
 
 from ..dynamics import EgoState
 from ..networks import RoadNet
-from ..termination import OFF_LANES, OFF_LANES_LB2, WRONG_LANE, WRONG_LANE_LB2, angle_diff
+from ..scoring.criteria import OFF_LANES, OFF_LANES_LB2, WRONG_LANE, WRONG_LANE_LB2
+from ..scoring.route import angle_diff
 from ..types import Event
 from ..vocab import EventKind
 from .drivable import DrivableArea
@@ -104,8 +105,8 @@ class LaneHeading:
 @dataclass(frozen=True)
 class SensorState:
     """The sensors' memory after a step. ``outside`` holds this step's OutsideRouteLanesTest
-    bits (:mod:`icrsumo.sim.lanes`): :data:`~icrsumo.termination.OFF_LANES` /
-    :data:`~icrsumo.termination.WRONG_LANE` by Leaderboard 1.0's rules, ``OFF_LANES_LB2`` /
+    bits (:mod:`icrsumo.sim.lanes`): :data:`~icrsumo.scoring.criteria.OFF_LANES` /
+    :data:`~icrsumo.scoring.criteria.WRONG_LANE` by Leaderboard 1.0's rules, ``OFF_LANES_LB2`` /
     ``WRONG_LANE_LB2`` by 2.0's; ``lane_state`` / ``lane_state_lb2``: the wrong-lane memories;
     ``speed_limit``: the speed limit (m/s) of the nearest driving lane;
     ``prev_lane``: the last lane SUMO placed the ego on; ``stopped``: lanes whose stop zone the

@@ -211,7 +211,7 @@ def test_the_store_refuses_another_agent_of_the_same_name(tmp_path):
             store.check_agents({"keyword": new})
         line = str(err.value)
         assert "agent keyword" in line and short(old) in line and short(new) in line
-        assert "--replace-agent keyword" in line and "another --out" in line and "\n" not in line
+        assert "replace_agents keyword" in line and "another out folder" in line and "\n" not in line
         # replacing: the other agent's rows go, rows of the new one (a resumed replacing run) stay
         store.claim_agents({"keyword": new}, replace=("keyword",))
         assert store.keys() == set()

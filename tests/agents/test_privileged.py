@@ -105,10 +105,10 @@ FIXED = {
 @pytest.mark.parametrize(("suite", "route"), sorted(FIXED), ids=lambda v: str(v))
 def test_route_oracle_drives_the_root_caused_routes_cleanly(suite, route, cache):
     from icrsumo.agents.privileged import RouteOracle
-    from icrsumo.cache import bundled_route
+    from icrsumo.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.metrics import score_episode
     from icrsumo.scenario import read_scenario
+    from icrsumo.scoring import score_episode
     from icrsumo.sim.episode import run_episode
 
     sc_dir, instr = bundled_route(route, suite)

@@ -38,8 +38,8 @@ def drive(tmp_path: Path, spec: RouteSpec, traffic: str = "normal", edit=None, c
     from icrsumo.convert import ConvertOptions, convert_routes
     from icrsumo.instructions.generate import GenerateOptions, generate
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.metrics import score_episode
     from icrsumo.scenario import read_scenario
+    from icrsumo.scoring import score_episode
     from icrsumo.sim.episode import run_episode
 
     f = tmp_path / "route.xml"
@@ -174,7 +174,7 @@ def test_sumo_never_teleports_the_ego_out_of_a_queue(tmp_path):
     route the ego queues behind a jam for more than 120 s: without the opt-out SUMO teleported
     it and the episode ended 'stuck' at RC 86.8."""
     from icrsumo.agents.privileged import RouteOracle
-    from icrsumo.cache import bundled_route
+    from icrsumo.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
     from icrsumo.scenario import read_scenario
     from icrsumo.sim.episode import run_episode
@@ -196,11 +196,11 @@ def test_a_left_turner_waiting_for_a_gap_does_not_hold_the_queue_behind_it_forev
     driver fully impatient after IMPATIENCE_S s of waiting (SUMO's --time-to-impatience,
     default 180 s): it then takes a gap that makes the oncoming car brake."""
     from icrsumo.agents.privileged import RouteOracle
-    from icrsumo.cache import bundled_route
+    from icrsumo.bundled import bundled_route
     from icrsumo.convert import IMPATIENCE_S
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.metrics import score_episode
     from icrsumo.scenario import read_scenario
+    from icrsumo.scoring import score_episode
     from icrsumo.sim.episode import run_episode
 
     sc_dir, instr = bundled_route("carla_fidelity_mixed_024", "carla-fidelity")
@@ -380,11 +380,11 @@ def test_the_sliver_route_drives_without_a_roadside_event():
     """carla_fidelity_mixed_000 (Town01), the route of class G's event, driven in SUMO: no
     roadside event, and nowhere on it are two corners off the area as built now."""
     from icrsumo.agents.privileged import RouteOracle
-    from icrsumo.cache import bundled_route
+    from icrsumo.bundled import bundled_route
     from icrsumo.dynamics import EgoState
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.metrics import score_episode
     from icrsumo.scenario import read_scenario
+    from icrsumo.scoring import score_episode
     from icrsumo.sim.drivable import drivable_area
     from icrsumo.sim.episode import run_episode
     from icrsumo.sim.sensors import off_corners
@@ -429,10 +429,10 @@ def test_traced_fidelity_routes_drive_clean(route, before):
     """Routes of the fidelity suite whose vehicle collisions were traced and fixed
     (docs/fidelity.md); each had DS 60.0 before."""
     from icrsumo.agents.privileged import RouteOracle
-    from icrsumo.cache import bundled_route
+    from icrsumo.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.metrics import score_episode
     from icrsumo.scenario import read_scenario
+    from icrsumo.scoring import score_episode
     from icrsumo.sim.episode import run_episode
 
     sc_dir, instr = bundled_route(route, "carla-fidelity")
@@ -448,10 +448,10 @@ def test_instruction_follower_chooses_again_when_a_new_instruction_comes_before_
     (route deviation at RC 2.4). A new instruction before the junction's entry now reopens
     the choice."""
     from icrsumo.agents.privileged import InstructionFollower
-    from icrsumo.cache import bundled_route
+    from icrsumo.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.metrics import score_episode
     from icrsumo.scenario import read_scenario
+    from icrsumo.scoring import score_episode
     from icrsumo.sim.episode import run_episode
 
     sc_dir, instr = bundled_route("carla_fidelity_junctions_009", "carla-fidelity")
@@ -490,7 +490,7 @@ def test_instruction_follower_follows_closely_spaced_maneuvers(route, until, bef
     baseline instructions came (layout 1) and how the follower used them (docs/fidelity.md):
     now the follower reaches ``until`` m without a route deviation."""
     from icrsumo.agents.privileged import InstructionFollower
-    from icrsumo.cache import bundled_route
+    from icrsumo.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
     from icrsumo.scenario import read_scenario
     from icrsumo.sim.episode import run_episode

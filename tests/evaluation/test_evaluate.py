@@ -122,7 +122,8 @@ def test_report_rescores_from_the_logs_alone_to_the_same_numbers(reference, tmp_
     """`report --scoring lb1` scores every stored episode again from its log (no simulation):
     the same records, the same summary and tables as the run that stored them; the episodes'
     terminations replay from their logs to the same kind and time."""
-    from icrsumo.termination import replay
+    from icrsumo.scoring.criteria import replay
+    from icrsumo.scoring.lb1 import LB1_RULES
 
     ref_out, _ = reference
     copy = tmp_path / "copy"
@@ -137,7 +138,7 @@ def test_report_rescores_from_the_logs_alone_to_the_same_numbers(reference, tmp_
     with ResultStore(ref_out / "results.sqlite") as store:
         for r in store.records():
             log = store.episode_log(r.agent, r.route_id, r.family, r.k, r.seed)
-            assert replay(log) == (log.termination, log.termination_t)
+            assert replay(log, LB1_RULES) == (log.termination, log.termination_t)
     code = main(["report", str(copy), "--quiet", "--scoring", "lb9"])
     assert code == 2 and "--scoring" in capsys.readouterr().err
 

@@ -18,13 +18,43 @@ import pytest
 
 pytestmark = pytest.mark.sumo
 
-ARGS = ["--agent", "instruction-follower", "--family", "paraphrase", "--k", "3", "--routes",
+#: the instruction-follower, held at its next decision while the file $ICRSUMO_TEST_HOLD exists
+#: (at most 120 s): a test that stops a run holds it first, so the run cannot end before the
+#: signal arrives however fast the machine is; the driving, and so every result, is the same
+HELD = """
+import os
+import time
+
+from icrsumo.agents.privileged import InstructionFollower
+
+
+class Held(InstructionFollower):
+    name = "held-follower"
+
+    def act(self, obs):
+        hold, t0 = os.environ.get("ICRSUMO_TEST_HOLD", ""), time.monotonic()
+        while hold and os.path.exists(hold) and time.monotonic() - t0 < 120:
+            time.sleep(0.05)
+        return super().act(obs)
+"""
+ARGS = ["--agent", "{agent}:Held", "--family", "paraphrase", "--k", "3", "--routes",
         "tiny_000,tiny_002", "--workers", "2", "--quiet"]
+_AGENT: list[Path] = []  # the agent file, written once per module (held_agent)
 
 
-def _start(out: Path, *extra: str, args: list[str] = ARGS) -> subprocess.Popen:
+@pytest.fixture(scope="module", autouse=True)
+def held_agent(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("agent") / "held_agent.py"
+    path.write_text(HELD, encoding="utf-8")
+    _AGENT[:] = [path]
+    return path
+
+
+def _start(out: Path, *extra: str, args: list[str] = ARGS, hold: Path | None = None) -> subprocess.Popen:
+    args = [a.format(agent=_AGENT[0]) for a in args]
+    env = {**os.environ, "ICRSUMO_TEST_HOLD": str(hold or "")}
     return subprocess.Popen([sys.executable, "-m", "icrsumo", "evaluate", *args, *extra, "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
 
 
 def _children(pid: int) -> list[int]:
@@ -81,9 +111,10 @@ def fresh(tmp_path_factory) -> bytes:
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
 def test_a_signal_stops_the_run_and_its_workers_and_a_rerun_resumes(tmp_path, fresh, sig):
-    out = tmp_path / "o"
-    p = _start(out)
+    out, hold = tmp_path / "o", tmp_path / "hold"
+    p = _start(out, hold=hold)
     workers = _wait_running(p, out)
+    hold.touch()                   # the workers wait at their next decision: the run cannot end
     p.send_signal(sig)
     assert p.wait(timeout=60) == 128 + sig
     err = p.stderr.read()

@@ -106,7 +106,7 @@ def test_the_registry_names_its_guards_and_refuses_duplicates_and_unknown_names(
     assert guard_factory("plan") is PlanGuard and guard_name("plan", PlanGuard) == "plan"
     with pytest.raises(ValueError, match="guard 'plan' is already registered"):
         GUARDS.register("plan", "x:Y")
-    with pytest.raises(InputError, match="--guard: nope: unknown guard .*text, plan"):
+    with pytest.raises(InputError, match="^guards: nope: unknown guard .*text, plan"):
         guard_factory("nope")
 
 

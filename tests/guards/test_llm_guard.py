@@ -42,8 +42,8 @@ def test_answers_that_are_not_a_verdict_are_problems(record, verdict):
     assert got == verdict and (problem == "") == (verdict is not None)
 
 
-def test_a_bad_llm_guard_spec_names_the_guard_option():
-    with pytest.raises(InputError, match="--guard: llm:nourl: an llm spec needs a model and a server URL"):
+def test_a_bad_llm_guard_spec_names_the_guards_field():
+    with pytest.raises(InputError, match="^guards: llm:nourl: an llm spec needs a model and a server URL"):
         llm_guard_factory("llm:nourl")
 
 

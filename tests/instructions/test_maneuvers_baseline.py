@@ -11,7 +11,7 @@ from icrsumo.instructions.maneuvers import extract_maneuvers, lane_change_pos, r
 from icrsumo.instructions.store import read_instruction_sets
 from icrsumo.networks import load_net
 from icrsumo.scenario import find_scenarios, read_scenario
-from icrsumo.types import Intent, Maneuver
+from icrsumo.types import Intent, JunctionPass, Maneuver
 
 
 def _all(converted):
@@ -26,7 +26,7 @@ def test_maneuvers_cover_junction_kinds_and_lane_changes(converted):
     for _, sc, ms in _all(converted):
         assert [m.pos for m in ms] == sorted(m.pos for m in ms)
         assert all(0 <= m.pos <= sc.length for m in ms)
-        choice = sum(1 for j in sc.manifest["junctions"] if j["choice"])
+        choice = sum(1 for j in sc.route.junctions if j.choice)
         assert sum(1 for m in ms if not m.kind.startswith("lane")) >= min(1, choice)
         kinds.update(m.kind for m in ms)
         junctions.update(m.junction for m in ms)
@@ -161,7 +161,8 @@ def test_a_lane_change_on_a_short_edge_is_asked_for_where_it_fits():
     of a CARLA town) comes back to where it fits, leaving room for the turn's announcement, but
     not before the previous junction maneuver's exit."""
     turns = [Maneuver("turn_right", 100.0, Intent.RIGHT, "traffic_light", "j0", end=120.0)]
-    junctions = [{"pos": 100.0}, {"pos": 150.0}, {"pos": 240.0}]
+    junctions = [JunctionPass(f"j{i}", "priority", "a", "b", 0, 0, ":j_0_0", "s", True, False, pos)
+                 for i, pos in enumerate((100.0, 150.0, 240.0))]
     # 4 m before the junction: one lane needs 30 m, plus 50 m for the turn's announcement
     assert lane_change_pos(236.0, 1, junctions, turns) == 160.0
     assert lane_change_pos(236.0, 2, junctions, turns) == 130.0
@@ -172,8 +173,8 @@ def test_a_lane_change_on_a_short_edge_is_asked_for_where_it_fits():
 def test_lane_changes_count_the_lanes_they_cross(converted):
     seen = set()
     for _, sc, ms in _all(converted):
-        changes = sc.manifest["lane_changes"]
+        changes = sc.route.lane_changes
         got = [m for m in ms if m.kind.startswith("lane_change")]
-        assert sorted(m.lanes for m in got) == sorted(abs(c["to_lane"] - c["from_lane"]) for c in changes)
+        assert sorted(m.lanes for m in got) == sorted(abs(c.to_lane - c.from_lane) for c in changes)
         seen.update(m.lanes for m in got)
     assert 1 in seen

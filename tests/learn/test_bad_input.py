@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from icrsumo.cli import main
-from icrsumo.errors import InputError
+from icrsumo.errors import Field, InputError
 from icrsumo.learn import nets
 from icrsumo.learn.agent import CHECKPOINTS, LearnedAgent
 from icrsumo.learn.collect import COLLECT_FORMAT, CollectOptions, collect
@@ -84,12 +84,12 @@ def run(data, tmp_path_factory) -> tuple[Path, Path]:
     return cfg, out
 
 
-def _raises(fn, file: Path | str, *words: str) -> InputError:
+def _raises(fn, file: Path | str | Field, *words: str) -> InputError:
     with pytest.raises(InputError) as info:
         fn()
     err = info.value
     line = err.line()
-    assert err.file == str(file), line
+    assert err.field == file.name if isinstance(file, Field) else err.file == str(file), line
     assert "\n" not in line and err.fix, line
     for w in words:
         assert w in line, line
@@ -146,7 +146,7 @@ def test_cuda_device_without_cuda(tmp_path):
     path.write_text('device = "cuda"\n')
     _raises(lambda: read_config(path), path, "device 'cuda': this machine has no CUDA device",
             "use cpu or auto")
-    _raises(lambda: read_config(tmp_path / "c.toml", device="cuda:0"), "--device", "no CUDA device")
+    _raises(lambda: read_config(tmp_path / "c.toml", device="cuda:0"), Field("device"), "no CUDA device")
 
 
 @pytest.mark.parametrize(("make", "words"), [
@@ -158,16 +158,18 @@ def test_config_path_that_is_no_file(make, words, tmp_path):
     _raises(lambda: read_config(path), path, *words)
 
 
-@pytest.mark.parametrize(("override", "option", "words"), [
-    ({"steps": 0}, "--steps", ["steps must be 1 to 100,000,000, not 0"]),
-    ({"seed": -3}, "--seed", ["seed -3 out of range"]),
-    ({"device": "tpu"}, "--device", ["device 'tpu': unknown device"]),
-    ({"device": "cuda:99"}, "--device", ["device 'cuda:99': this machine has"]),
+@pytest.mark.parametrize(("override", "words"), [
+    ({"steps": 0}, ["steps must be 1 to 100,000,000, not 0"]),
+    ({"seed": -3}, ["seed -3 out of range"]),
+    ({"device": "tpu"}, ["device 'tpu': unknown device"]),
+    ({"device": "cuda:99"}, ["device 'cuda:99': this machine has"]),
 ])
-def test_bad_command_line_override_names_the_option(override, option, words, tmp_path):
+def test_bad_override_names_its_field(override, words, tmp_path):
+    """A value given beside the config (the command line's --steps, ...) is named by its field
+    (the CLI names its option: test_cli_train_refuses_in_one_line_and_writes_nothing)."""
     path = tmp_path / "c.toml"
     path.write_text(TINY)
-    err = _raises(lambda: read_config(path, **override), option, *words)
+    err = _raises(lambda: read_config(path, **override), Field(*override), *words)
     assert err.place == ""
 
 

@@ -17,9 +17,9 @@ from icrsumo.errors import InputError
 from icrsumo.instructions.generate import GenerateOptions, generate
 from icrsumo.instructions.store import read_instruction_sets
 from icrsumo.logs import dumps_log
-from icrsumo.metrics import score_episode
 from icrsumo.resources import bundled_suites
 from icrsumo.scenario import find_scenarios, read_scenario
+from icrsumo.scoring import score_episode
 from icrsumo.sim.episode import run_episode
 from icrsumo.types import TerminationClass
 
@@ -125,9 +125,9 @@ def test_red_light_run_is_an_infraction_and_waiting_is_not(quiet):
     from icrsumo.networks import load_net
 
     sc, sets = _load(quiet, "tiny", "tiny_000")  # straight across a signalised junction
-    j = next(j for j in sc.manifest["junctions"] if j["junction_type"] == "traffic_light")
+    j = next(j for j in sc.route.junctions if j.junction_type == "traffic_light")
     net = load_net(sc.net)
-    conn = next(c for c in net.connections[(j["from_edge"], j["to_edge"])])
+    conn = next(c for c in net.connections[(j.from_edge, j.to_edge)])
     phase = re.search(rf'<tlLogic id="{conn.tls}".*?state="([^"]+)"', sc.net.read_text(), re.S)
     n_links = len(phase.group(1))
     sc2 = _with_additional(sc, _all_red(sc, conn.tls, n_links), "allred.add.xml")
@@ -137,7 +137,7 @@ def test_red_light_run_is_an_infraction_and_waiting_is_not(quiet):
     careful = run_episode(sc2, sets[0], RouteOracle())
     assert not [e for e in careful.events if e.kind == "red_light"]
     assert careful.termination in ("route_timeout", "agent_blocked")
-    assert careful.progress[-1] < j["pos"]
+    assert careful.progress[-1] < j.pos
 
 
 def test_leaving_the_route_ends_as_rd(quiet):
@@ -200,13 +200,13 @@ def test_stop_sign_run_is_an_infraction_and_stopping_is_not(quiet):
 
     sc, sets = _load(quiet, "tiny", "tiny_014")  # a priority_stop junction on the route
     net = load_net(sc.net)
-    j = next(j for j in sc.manifest["junctions"]
-             if {c.state for c in net.connections[(j["from_edge"], j["to_edge"])]} & {"s", "w"})
+    j = next(j for j in sc.route.junctions
+             if {c.state for c in net.connections[(j.from_edge, j.to_edge)]} & {"s", "w"})
     blind = run_episode(sc, sets[0], BlindOracle(speed=6.0))
     assert [e.kind for e in blind.events].count("stop_sign") == 1
     assert any(i.kind == "stop_sign" and i.factor == 0.8 for i in score_episode(blind).infractions)
     careful = run_episode(sc, sets[0], RouteOracle())
-    assert careful.termination == "completed" and careful.progress[-1] > j["pos"]
+    assert careful.termination == "completed" and careful.progress[-1] > j.pos
     assert not [e for e in careful.events if e.kind == "stop_sign"]
 
 
@@ -276,6 +276,8 @@ def test_only_agents_that_declare_it_get_the_route(quiet):
             obs, routes = ep.start(), set()
             for _ in range(5):
                 routes.add(obs.world.route is not None)
+                # the whole route, its junction passes included (tiny_003 turns left once)
+                assert obs.world.route is None or (obs.world.route == sc.route and sc.route.junctions)
                 obs = ep.step(Action(control=Control(brake=1.0)))
             seen[needs_route] = routes
     assert seen == {True: {True}, False: {False}}

@@ -16,11 +16,11 @@ import pytest
 from icrsumo.dynamics import EgoState
 from icrsumo.networks import load_net
 from icrsumo.resources import bundled_towns
+from icrsumo.scoring.criteria import OFF_LANES
 from icrsumo.sim.drivable import DrivableArea, drivable_area
 from icrsumo.sim.frame import Contact, SimFrame, frame_from_dict, frame_to_dict
 from icrsumo.sim.lanes import driving_lanes
 from icrsumo.sim.sensors import Sensors, SensorState
-from icrsumo.termination import OFF_LANES
 from icrsumo.vocab import EventKind
 
 FRAMES = Path(__file__).resolve().parents[1] / "data" / "frames"
@@ -95,7 +95,7 @@ def test_contacts_are_events_on_every_step_of_contact_and_pedestrians_by_kind(gr
     state = SensorState()
     car, ped = Contact("car1", False), Contact("p0", True)
     # (the ego's contacts, SUMO reported some collision): one event per actor in contact on each
-    # step (the leaderboard's CollisionTest, in icrsumo.metrics, decides which ones count)
+    # step (the leaderboard's CollisionTest, in icrsumo.scoring, decides which ones count)
     seq = [((car,), True), ((car,), True), ((car, ped), True), ((), False), ((car,), True),
            ((), True), ((car,), True)]
     kinds = []

@@ -1,6 +1,6 @@
 """The local backend: worker processes on this machine (one SUMO each), fed one job at a time
 over a pipe, with a watchdog in the parent that kills and replaces a worker whose agent call (or
-guard call) overruns the timeout (:class:`~icrsumo.evaluation.watch.SlotWatch`) or that dies."""
+guard call) overruns the timeout (:class:`~icrsumo.agents.watch.SlotWatch`) or that dies."""
 
 from __future__ import annotations
 

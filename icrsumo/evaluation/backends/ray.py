@@ -1,6 +1,6 @@
 """The Ray backend: ``workers`` Ray actors (one CPU each, on this machine or on the cluster at
 ``address``), each an :class:`~icrsumo.evaluation.execute.EpisodeWorker` whose agent calls are
-interrupted by SIGALRM after the timeout (:class:`~icrsumo.evaluation.watch.AlarmWatch`: no
+interrupted by SIGALRM after the timeout (:class:`~icrsumo.agents.watch.AlarmWatch`: no
 parent watches them). An actor that dies is replaced; its episode is reported as crashed."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import contextlib
 from collections.abc import Iterator
 
 from ...agents.watch import AlarmWatch
-from ...errors import InputError
+from ...errors import Field, InputError
 from ...vocab import ErrorKind
 from ..execute import EpisodeWorker, Outcome
 from ..plan import Job
@@ -34,7 +34,7 @@ def run_ray(jobs: list[Job], workers: int, address: str | None = None,
         import ray
         from ray.exceptions import RayError
     except ImportError:
-        raise InputError("--backend ray", "", "Ray is not installed",
+        raise InputError(f"{Field('backend')} ray", "", "Ray is not installed",
                          "pip install 'icrsumo[ray]'") from None
     if not jobs:
         return

@@ -1,24 +1,24 @@
-"""Leaderboard 1.0 scoring (icrsumo.metrics) on hand-built logs, no SUMO.
+"""Leaderboard 1.0's scoring (icrsumo.scoring.lb1) on hand-built logs and records, no SUMO.
 
-Logs are built as in tests/test_termination.py: 20 Hz steps, the ego centre at x = 0.25 + 0.5 i
-on step i (t = 0.05 i), a straight 100 m route along +x unless stated. Expected values are
-worked out in the comments from the leaderboard's rules (statistics_manager.py,
-CollisionTest, OutsideRouteLanesTest).
+Logs as tests/hand_logs.py builds them: 20 Hz steps, the ego centre at x = 0.25 + 0.5 i on
+step i (t = 0.05 i), a straight 100 m route along +x unless stated. Expected values are worked
+out in the comments from the leaderboard's rules (statistics_manager.py, CollisionTest,
+OutsideRouteLanesTest).
 """
 
 from __future__ import annotations
 
+import json
+
 import pytest
-from test_termination import make_log, straight
+from hand_logs import ROUTE, contact, make_log, straight  # tests/ is on pytest's pythonpath
+from records_example import rec, tiny
 
-from icrsumo.metrics import PENALTIES, SCORINGS, Scoring, counted_collisions, register_scoring, score_episode
-from icrsumo.types import Event
-
-ROUTE = ((0.0, 0.0), (100.0, 0.0))
-
-
-def contact(kind: str, i: int, other: str) -> Event:
-    return Event(kind, round(0.05 * i, 3), 0.0, other, 0.25 + 0.5 * i, 0.0)
+from icrsumo.fsio import dumps_json
+from icrsumo.scoring import score_episode
+from icrsumo.scoring.lb1 import LB1, counted_collisions, leaderboard_checkpoint
+from icrsumo.scoring.penalties import PENALTIES
+from icrsumo.types import EpisodeRecord, Event
 
 
 def test_penalty_constants():
@@ -69,7 +69,7 @@ def test_pedestrian_red_light_and_stop_sign_factors():
 
 
 def test_a_wrong_turn_into_a_legal_lane_costs_rc_not_is():
-    # as in test_termination: deviation at (50, 30) with RC 24.5 %; the lane taken is legal
+    # as in tests/scoring/test_criteria.py: deviation at (50, 30) with RC 24.5 %; the lane taken is legal
     # (no outside bits), so IS stays 1: DS = 24.5
     xy = straight(100) + [(50.0, 0.5 * j) for j in range(1, 61)]
     res = score_episode(make_log(xy, ((0.0, 0.0), (200.0, 0.0)), termination="route_deviation"))
@@ -102,87 +102,77 @@ def test_empty_log_scores_zero():
     assert (res.rc, res.is_, res.ds, res.duration) == (0.0, 1.0, 0.0, 0.0)
 
 
-def test_scoring_registry_refuses_duplicates_and_unknown_names():
-    assert "lb1" in SCORINGS
-    with pytest.raises(ValueError, match="registered already"):
-        register_scoring(Scoring("lb1", "again", SCORINGS["lb1"].score))
-    with pytest.raises(ValueError, match="unknown scoring"):
-        score_episode(make_log(straight(3), ROUTE), "lb9")
+
+def test_step_budget_is_the_route_timeout_plus_a_margin():
+    # int(0.8 * 100 + 5) = 85 s, plus 10 s, at 20 Hz, plus 10 steps
+    assert LB1.time_budget(100.0) == 85.0
+    assert LB1.max_steps(100.0, 0.05) == int(95.0 / 0.05) + 10 == 1910
 
 
-# ------------------------------------------------------------------ Leaderboard 2.0 (lb2)
-def lb2_log(xy, *, speed=None, traffic=10.0, limit=10.0, outside=None, events=(), termination="completed"):
-    """A log with 2.0's columns: the other vehicles' mean speed and the lane's speed limit (m/s)."""
-    from dataclasses import replace
+# ------------------------------------------------------------------ the results file
+def test_leaderboard_checkpoint():
+    recs = tiny() + [rec("B", "r4", "misleading", 0, 30, 100, 0.3,
+                         infractions=(("collision_vehicle", 0.6), ("red_light", 0.7),
+                                      ("outside_route_lanes", 0.3 / 0.42)))]
+    cp = leaderboard_checkpoint(recs, "B", "misleading")
+    assert set(cp) == {"_checkpoint", "entry_status", "eligible", "sensors", "values", "labels"}
+    # r1 k1 crashed in the simulator: the leaderboard stops there with 'Crashed', not eligible
+    assert cp["entry_status"] == "Crashed" and cp["eligible"] is False and cp["sensors"] == []
+    c = cp["_checkpoint"]
+    assert set(c) == {"global_record", "progress", "records"}
+    assert c["progress"] == [7, 7] and len(c["records"]) == 7
+    recs_by_id = {r["route_id"]: r for r in c["records"]}
+    assert [r["index"] for r in c["records"]] == list(range(7))
+    first = c["records"][0]
+    assert set(first) == {"route_id", "index", "status", "infractions", "scores", "meta"}
+    assert set(first["infractions"]) == {
+        "collisions_layout", "collisions_pedestrian", "collisions_vehicle", "outside_route_lanes",
+        "red_light", "route_dev", "route_timeout", "stop_infraction", "vehicle_blocked"}
+    assert set(first["scores"]) == {"score_route", "score_penalty", "score_composed"}
+    assert set(first["meta"]) == {"route_length", "duration_game", "duration_system"}
 
-    log = make_log(xy, ROUTE, speed=speed, outside=outside, events=events, termination=termination)
-    return replace(log, traffic_speed=(traffic,) * len(xy), speed_limit=(limit,) * len(xy))
+    r1 = recs_by_id["RouteScenario_r1_misleading_0"]
+    assert r1["status"] == "Failed - Agent deviated from the route"
+    assert r1["infractions"]["route_dev"] == ["Agent deviated from the route"]
+    assert recs_by_id["RouteScenario_r1_misleading_1"]["status"] == "Failed - Simulation crashed"
+    assert recs_by_id["RouteScenario_r2_misleading_1"]["status"] == "Failed - Agent timed out"
+    assert recs_by_id["RouteScenario_r2_misleading_1"]["infractions"]["route_timeout"] == ["Route timeout."]
+    assert recs_by_id["RouteScenario_r3_misleading_0"]["status"] == "Completed"
+    r4 = recs_by_id["RouteScenario_r4_misleading_0"]
+    assert r4["scores"] == {"score_route": 100.0, "score_penalty": 0.3, "score_composed": 30.0}
+    assert len(r4["infractions"]["collisions_vehicle"]) == 1 and len(r4["infractions"]["red_light"]) == 1
+    # the outside-lanes entry comes from the stored infraction (1 - 0.3 / 0.42 = 28.57 %) ...
+    assert "28.57%" in r4["infractions"]["outside_route_lanes"][0]
+    # ... never from IS arithmetic: r3 k0 has IS 0.9 but no such infraction, so no entry
+    assert recs_by_id["RouteScenario_r3_misleading_0"]["infractions"]["outside_route_lanes"] == []
 
+    g = c["global_record"]
+    assert g["index"] == -1 and g["route_id"] == -1 and g["status"] == "Failed"
+    assert set(g) >= {"route_id", "index", "status", "infractions", "scores", "meta"}
+    # means over every route, the crashed one (0) included
+    assert g["scores"]["score_composed"] == pytest.approx((20 + 0 + 10 + 50 + 90 + 45 + 30) / 7)
+    # rates: sum over routes of count / max(RC / 100 x 0.5 km, 0.001): route deviations on r1 k0
+    # (RC 20: 1 / 0.1), r2 k0 (RC 10: 1 / 0.05), r3 k1 (RC 50: 1 / 0.25); r4's collision (RC 100)
+    assert g["infractions"]["route_dev"] == pytest.approx(10 + 20 + 4, abs=1e-6)
+    assert g["infractions"]["collisions_vehicle"] == pytest.approx(2.0, abs=1e-6)
+    assert ["RouteScenario_r1_misleading_1", 1, "Failed - Simulation crashed"] in g["meta"]["exceptions"]
+    assert g["meta"]["total_length"] == 3000.0 and g["meta"]["duration_game"] == 360.0  # crashed: 0
+    assert g["meta"]["duration_system"] == -1
+    assert len(cp["values"]) == len(cp["labels"]) == 12
+    assert cp["labels"][0] == "Avg. driving score"
+    assert cp["values"][0] == f"{g['scores']['score_composed']:.3f}"
+    json.loads(dumps_json(cp))  # serialisable, no NaN
 
-def test_lb2_minimum_speed_checkpoints():
-    # 5 m/s against traffic at 10 m/s (0.25 m per step, x = 0.25 + 0.25 i): 4 checkpoints of
-    # 25 m; a checkpoint closes once the route advance since the last one exceeds 25 m (points
-    # 26, 52, 78) and at the end (100 % > 95 %): four times 50 % -> 1 - 0.3 x 0.5 = 0.85 each
-    xy = [(0.25 + 0.25 * i, 0.0) for i in range(402)]
-    res = score_episode(lb2_log(xy, speed=[5.0] * len(xy)), "lb2")
-    assert [str(i.kind) for i in res.infractions] == ["min_speed"] * 4
-    assert res.is_ == pytest.approx(0.85 ** 4, abs=1e-6) and res.rc == 100.0
-    # as fast as the traffic: no infraction; lb1 has no such test
-    same = lb2_log(xy, speed=[10.0] * len(xy))
-    assert score_episode(same, "lb2").infractions == ()
-    assert score_episode(lb2_log(xy, speed=[5.0] * len(xy)), "lb1").infractions == ()
+    # without the simulator crash: deviations and timeouts name the agent
+    ok = [r for r in recs if r.status == "done"]
+    assert leaderboard_checkpoint(ok, "B", "misleading")["entry_status"] == "Finished with agent errors"
+    done = [rec("B", "r3", "misleading", 0, 90, 100, 0.9)]
+    assert leaderboard_checkpoint(done, "B", "misleading")["entry_status"] == "Finished"
 
-
-def test_lb2_route_timeout_grows_with_the_route_advance():
-    # 2.0: 300 s, plus each metre of advance at 10 % of the speed limit (10 m/s -> 1 s per m);
-    # 50 points passed -> 350 s; 1.0's budget for 100 m is int(85) s
-    from icrsumo.termination import LB2_RULES, DenseRoute, TerminationMonitor
-
-    mon = TerminationMonitor(DenseRoute.from_polyline(ROUTE), 0.0, LB2_RULES)
-    for i, (x, y) in enumerate(straight(101)):
-        mon.locate(x, y)
-        mon.update(0.05 * i, 10.0, 0, (), 10.0, 10.0)
-    assert mon.timeout == pytest.approx(350.0)
-
-
-def test_lb2_collisions_ignore_a_standing_ego_and_keep_one_place():
-    # veh1 at step 20 counts (x = 10.25); veh2 at step 28 (4 m away, within 2.0's 5 m) is
-    # ignored; veh3 at step 40 while the ego stands (speed 0.05) is ignored and remembers
-    # nothing; veh4 at step 60 (20 m on) counts: 0.6^2
-    speed = [10.0] * 201
-    speed[40] = 0.05
-    evs = (contact("collision_vehicle", 20, "veh1"), contact("collision_vehicle", 28, "veh2"),
-           contact("collision_vehicle", 40, "veh3"), contact("collision_vehicle", 60, "veh4"))
-    res = score_episode(lb2_log(straight(201), speed=speed, events=evs), "lb2")
-    assert [i.other for i in res.infractions if i.kind == "collision_vehicle"] == ["veh1", "veh4"]
-    # 1.0 counts veh3 (no speed rule) and veh2 is 4 m > 3 m away: all four
-    assert len(score_episode(lb2_log(straight(201), speed=speed, events=evs), "lb1").infractions) == 4
-
-
-def test_lb2_reads_its_own_outside_bits():
-    # bits 4 / 8 are 2.0's (lanes left beyond width / 2 + 0.5 m); bit 1 alone is 1.0's
-    xy = straight(201)
-    flags = [4 if 20 < x <= 40 else 1 if 60 < x <= 70 else 0 for x, _ in xy]
-    log = lb2_log(xy, outside=flags)
-    assert score_episode(log, "lb2").outside_lanes_pct == pytest.approx(20.0)
-    assert score_episode(log, "lb1").outside_lanes_pct == pytest.approx(10.0)
-
-
-def test_rescoring_under_rules_that_end_sooner_is_exact_and_later_is_flagged():
-    from icrsumo.metrics import ended_by
-    from icrsumo.termination import LB1_RULES, LB2_RULES
-
-    # recorded until 2.0's blocked rule (moving to step 100, then standing): 1.0's route
-    # timeout (85 s for 100 m) ends it sooner, at 85.05 s: the cut log is 1.0's run
-    n = 3702
-    xy = straight(101) + [(50.25, 0.0)] * (n - 101)
-    log = lb2_log(xy, speed=[10.0] * 101 + [0.0] * (n - 101), termination="agent_blocked")
-    cut, exact = ended_by(log, LB1_RULES)
-    assert exact and cut.termination == "route_timeout" and cut.t[-1] == 85.05
-    assert score_episode(log, "lb1").termination == "route_timeout"
-    # the other way: 2.0's rules would have run past 85 s, so the cut log is not their run
-    short, exact = ended_by(cut, LB2_RULES)
-    assert not exact and short is cut
+    blocked = [EpisodeRecord("X", "r", "noise", 0, 1, "done", termination="agent_blocked",
+                             termination_class="TO", is_=1.0)]
+    cb = leaderboard_checkpoint(blocked, "X", "noise")["_checkpoint"]["records"][0]
+    assert cb["status"] == "Failed - Agent got blocked" and len(cb["infractions"]["vehicle_blocked"]) == 1
 
 
 # ------------------------------------------------------------------ against the transcription

@@ -1,0 +1,80 @@
+"""What the leaderboard results files (``leaderboard/<agent>_<family>.json``) of Leaderboard
+1.0 and 2.0 share: the records of one agent and family in the leaderboard's order, a record's
+status and the infraction entry its termination adds, the entry of each penalised event, and
+1.0's labels (2.0 extends them). Each version's file: :mod:`icrsumo.scoring.lb1`,
+:mod:`icrsumo.scoring.lb2`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+
+from ..types import EpisodeRecord
+from ..vocab import EpisodeStatus, EventKind, Termination
+
+#: penalised event kind -> (infraction key, message)
+EVENT_ENTRIES = {
+    EventKind.COLLISION_PEDESTRIAN: ("collisions_pedestrian", "Agent collided against a pedestrian"),
+    EventKind.COLLISION_VEHICLE: ("collisions_vehicle", "Agent collided against a vehicle"),
+    EventKind.COLLISION_STATIC: ("collisions_layout", "Agent collided against the static layout"),
+    EventKind.RED_LIGHT: ("red_light", "Agent ran a red light"),
+    EventKind.STOP_SIGN: ("stop_infraction", "Agent ran a stop sign"),
+}
+#: termination -> (status, infraction key, message)
+TERMINATION_STATUS = {
+    Termination.COMPLETED: ("Completed", None, ""),
+    Termination.ROUTE_DEVIATION: ("Failed - Agent deviated from the route", "route_dev",
+                                  "Agent deviated from the route"),
+    Termination.ROUTE_TIMEOUT: ("Failed - Agent timed out", "route_timeout", "Route timeout."),
+    Termination.AGENT_BLOCKED: ("Failed - Agent got blocked", "vehicle_blocked", "Agent got blocked"),
+    Termination.STUCK: ("Failed - Agent got blocked", "vehicle_blocked",
+                        "Agent got stuck (SUMO teleported the ego)"),
+    Termination.SIM_ERROR: ("Failed - Simulation crashed", None, ""),
+}
+#: Leaderboard 1.0's labels of the file's ``values``
+LABELS = ["Avg. driving score", "Avg. route completion", "Avg. infraction penalty",
+          "Collisions with pedestrians", "Collisions with vehicles", "Collisions with layout",
+          "Red lights infractions", "Stop sign infractions", "Off-road infractions", "Route deviations",
+          "Route timeouts", "Agent blocked"]
+
+#: (record, infraction kind, factor) -> (infraction key, message) for the kinds a version words
+#: itself, else None
+Wording = Callable[[EpisodeRecord, str, float], tuple[str, str] | None]
+
+
+def agent_records(records: Iterable[EpisodeRecord], agent: str, family: str) -> list[EpisodeRecord]:
+    """The records of ``agent`` and ``family`` sorted by (route_id, k, seed)."""
+    return sorted((r for r in records if r.agent == agent and r.family == family),
+                  key=lambda r: (r.route_id, r.k, r.seed))
+
+
+def route_name(r: EpisodeRecord) -> str:
+    """The record's ``route_id`` in the file: ``RouteScenario_<route>_<family>_<k>``."""
+    return f"RouteScenario_{r.route_id}_{r.family}_{r.k}"
+
+
+def route_status(r: EpisodeRecord) -> tuple[str, str | None, str]:
+    """A record's leaderboard status, the infraction key its termination adds and that entry."""
+    if r.status == EpisodeStatus.CRASHED:
+        return ("Failed - Agent crashed" if "agent" in r.message.lower() else "Failed - Simulation crashed",
+                None, "")
+    return TERMINATION_STATUS.get(r.termination, (f"Failed - {r.termination}", None, ""))
+
+
+def record_infractions(r: EpisodeRecord, keys: Sequence[str], wording: Wording
+                       ) -> tuple[str, dict[str, list[str]]]:
+    """A record's status and its infraction entries under ``keys`` (none for a crashed
+    episode): each stored infraction as ``wording`` words it, else as a penalised event
+    (``<message> (penalty <factor>)``), then the entry its termination adds."""
+    infr: dict[str, list[str]] = {k: [] for k in keys}
+    status, key, msg = route_status(r)
+    if r.status != EpisodeStatus.CRASHED:
+        for kind, factor in r.infractions:
+            worded = wording(r, kind, factor)
+            if worded is None:
+                lb_key, text = EVENT_ENTRIES.get(kind, ("collisions_layout", f"Agent infraction {kind}"))
+                worded = lb_key, f"{text} (penalty {factor:.2f})"
+            infr[worded[0]].append(worded[1])
+        if key is not None:
+            infr[key].append(msg)
+    return status, infr
