@@ -1,4 +1,5 @@
-"""ICR-Drive aggregation of stored episodes: means, paired deltas, RD/TO split, bootstrap CIs.
+"""ICR-Drive aggregation of stored episodes: means, paired deltas, RD/TO split, bootstrap CIs,
+tests and decision statistics.
 
 Pure (numpy and scipy's Wilcoxon test): the same records, in any order, give the same summary bytes.
 
@@ -30,21 +31,40 @@ Definitions (per agent and family f; crashed episodes are counted and excluded f
   not, "gained": the reverse};
 - model_calls, invalid_answers, invalid_rate (only for an agent that asked a language model,
   :mod:`icrsumo.agents.llm`): its questions over the complete pairs' variant episodes (the
-  baseline row: over its episodes), the invalid answers among them, and their share.
+  baseline row: over its episodes), the invalid answers among them, and their share;
+- decisions, adherence, confusion, compliance (families only) and, for a language-model agent,
+  answers: the decision statistics of :func:`icrsumo.attribution.block_stats` over the row's
+  episodes (when :func:`summarize` is given the episodes' decisions).
 
-Values are rounded (4 decimals, IS and dIS 6); a quantity without data is ``None``, never NaN.
+:func:`summarize` returns a typed :class:`icrsumo.summary.Summary` (summary.json). Values are
+rounded (4 decimals, IS and dIS 6); a quantity without data is ``None``, never NaN.
 """
 
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterable, Sequence
-from typing import Any
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .attribution import Key, answer_confusion, block_stats, episode_key
+from .summary import (
+    AgentStats,
+    AnswerCounts,
+    BaselineStats,
+    DecisionStats,
+    EpisodeCounts,
+    FamilyStats,
+    Flips,
+    Summary,
+)
 from .types import EpisodeRecord
 from .vocab import FAMILIES, Family
+
+if TYPE_CHECKING:
+    from .decisions import Decision
 
 BASELINE = Family.BASELINE
 
@@ -82,15 +102,10 @@ def _share(recs: Sequence[EpisodeRecord], cls: str) -> float | None:
     return _rnd(sum(r.termination_class == cls for r in recs) / len(recs))
 
 
-def _absolute(recs: Sequence[EpisodeRecord]) -> dict[str, Any]:
-    return {
-        "DS": _mean([r.ds for r in recs]),
-        "RC": _mean([r.rc for r in recs]),
-        "IS": _mean([r.is_ for r in recs], 6),
-        "RD": _share(recs, "RD"),
-        "TO": _share(recs, "TO"),
-        "n": len(recs),
-    }
+def _absolute(recs: Sequence[EpisodeRecord]) -> tuple[float | None, ...]:
+    """DS, RC, IS means and the RD, TO shares of ``recs``."""
+    return (_mean([r.ds for r in recs]), _mean([r.rc for r in recs]), _mean([r.is_ for r in recs], 6),
+            _share(recs, "RD"), _share(recs, "TO"))
 
 
 def bootstrap_ci(route_means: np.ndarray, *, n_boot: int, seed: int,
@@ -111,61 +126,81 @@ def bootstrap_ci(route_means: np.ndarray, *, n_boot: int, seed: int,
     return np.percentile(boots, [100.0 * alpha, 100.0 * (1.0 - alpha)], axis=0)
 
 
-def _answers(recs: Sequence[EpisodeRecord]) -> dict[str, Any]:
+def _answers(recs: Sequence[EpisodeRecord]) -> AnswerCounts:
     """Model calls, invalid answers and their share over ``recs``."""
     calls = sum(r.model_calls for r in recs)
     bad = sum(r.invalid_answers for r in recs)
-    return {"model_calls": calls, "invalid_answers": bad,
-            "invalid_rate": _rnd(bad / calls) if calls else None}
+    return AnswerCounts(calls, bad, _rnd(bad / calls) if calls else None)
 
 
-def _family_block(recs: list[EpisodeRecord], base: dict[_Key, EpisodeRecord], *,
-                  n_boot: int, boot_seed: int, n_crashed: int = 0, answers: bool = False) -> dict[str, Any]:
-    paired = [r for r in recs if (r.route_id, r.seed) in base]
-    block = _absolute(paired)
-    pair_base = [base[(r.route_id, r.seed)] for r in paired]  # one baseline per pair
-    out: dict[str, Any] = {
-        "DS": block["DS"], "RC": block["RC"], "IS": block["IS"], "base_DS": _mean([b.ds for b in pair_base]),
-        "base_RC": _mean([b.rc for b in pair_base]), "base_IS": _mean([b.is_ for b in pair_base], 6)}
+@dataclass(frozen=True)
+class _Pairs:
+    """One agent's complete pairs of one family: the family's finished episodes (``finished``),
+    those whose route's baseline finished (``paired``) with that baseline (``pair_base``), and
+    per route (sorted) the (dDS, dRC, dIS) of its pairs in k order (``deltas``)."""
 
-    per_route: dict[_Key, list[tuple[float, float, float]]] = {}
-    failed: set[_Key] = set()
-    lost = gained = 0
-    for r, b in zip(paired, pair_base):  # sorted, so per-route lists are in k order
-        per_route.setdefault((r.route_id, r.seed), []).append((r.ds - b.ds, r.rc - b.rc, r.is_ - b.is_))
-        if b.termination_class == "done" and r.termination_class != "done":
-            failed.add((r.route_id, r.seed))
-            lost += 1
-        elif b.termination_class != "done" and r.termination_class == "done":
-            gained += 1
-    routes = sorted(per_route)
-    deltas = [np.asarray(per_route[k], dtype=float) for k in routes]
-    if deltas:
-        pairs = np.concatenate(deltas, axis=0)  # (pairs, 3): dDS, dRC, dIS
-        d_mean = pairs.mean(axis=0)
-        worst = float(np.mean([d[:, 0].min() for d in deltas]))
-        route_means = np.stack([d[:, :2].mean(axis=0) for d in deltas])  # (R, 2)
-        ci = bootstrap_ci(route_means, n_boot=n_boot, seed=boot_seed)
-        base_mean = np.asarray([(b.ds, b.rc) for b in pair_base], dtype=float).mean(axis=0)  # (DS, RC)
-        out.update(
-            dDS=_rnd(d_mean[0]), dRC=_rnd(d_mean[1]), dIS=_rnd(d_mean[2], 6), worst_dDS=_rnd(worst),
-            dDS_ci95=[_rnd(ci[0, 0]), _rnd(ci[1, 0])], dRC_ci95=[_rnd(ci[0, 1]), _rnd(ci[1, 1])],
-            pdr_DS=relative_drop(base_mean[0], d_mean[0]), pdr_RC=relative_drop(base_mean[1], d_mean[1]),
-            p_value_raw=_rnd(paired_test(route_means[:, 0]), 6),
-        )
-    else:
-        out.update(dDS=None, dRC=None, dIS=None, worst_dDS=None, dDS_ci95=None, dRC_ci95=None,
-                   pdr_DS=None, pdr_RC=None, p_value_raw=None)
-    out.update(
-        RD=block["RD"], TO=block["TO"], n=block["n"], n_routes=len(routes),
-        baseline_done_variant_failed=len(failed),
-        n_pairs=int(sum(len(d) for d in deltas)),
-        n_crashed=int(n_crashed), unpaired=len(recs) - len(paired),
-        flips={"lost": lost, "gained": gained},
-    )
-    if answers:
-        out.update(_answers(paired))
-    return out
+    finished: int
+    paired: list[EpisodeRecord]
+    pair_base: list[EpisodeRecord]
+    deltas: list[np.ndarray]
+    lost: int
+    gained: int
+    failed_routes: int
+
+    @classmethod
+    def of(cls, recs: list[EpisodeRecord], base: dict[_Key, EpisodeRecord]) -> _Pairs:
+        paired = [r for r in recs if (r.route_id, r.seed) in base]
+        pair_base = [base[(r.route_id, r.seed)] for r in paired]  # one baseline per pair
+        per_route: dict[_Key, list[tuple[float, float, float]]] = {}
+        failed: set[_Key] = set()
+        lost = gained = 0
+        for r, b in zip(paired, pair_base):  # sorted, so per-route lists are in k order
+            per_route.setdefault((r.route_id, r.seed), []).append((r.ds - b.ds, r.rc - b.rc, r.is_ - b.is_))
+            if b.termination_class == "done" and r.termination_class != "done":
+                failed.add((r.route_id, r.seed))
+                lost += 1
+            elif b.termination_class != "done" and r.termination_class == "done":
+                gained += 1
+        deltas = [np.asarray(per_route[k], dtype=float) for k in sorted(per_route)]
+        return cls(len(recs), paired, pair_base, deltas, lost, gained, len(failed))
+
+    @property
+    def route_means(self) -> np.ndarray:
+        """(R, 2): per route the mean dDS and dRC over its pairs."""
+        return np.stack([d[:, :2].mean(axis=0) for d in self.deltas])
+
+    @property
+    def p_value_raw(self) -> float | None:
+        """The Wilcoxon p-value of the per-route mean dDS (None without a pair)."""
+        return _rnd(paired_test(self.route_means[:, 0]), 6) if self.deltas else None
+
+
+def _deltas(p: _Pairs, n_boot: int, boot_seed: int) -> dict[str, Any]:
+    """The paired deltas of ``p``: mean, worst, bootstrap intervals, relative drops (None each
+    without a pair)."""
+    if not p.deltas:
+        return dict(d_ds=None, d_rc=None, d_is=None, worst_d_ds=None, d_ds_ci95=None, d_rc_ci95=None,
+                    pdr_ds=None, pdr_rc=None)
+    d_mean = np.concatenate(p.deltas, axis=0).mean(axis=0)  # over the pairs: dDS, dRC, dIS
+    worst = float(np.mean([d[:, 0].min() for d in p.deltas]))
+    ci = bootstrap_ci(p.route_means, n_boot=n_boot, seed=boot_seed)
+    base_mean = np.asarray([(b.ds, b.rc) for b in p.pair_base], dtype=float).mean(axis=0)  # (DS, RC)
+    return dict(d_ds=_rnd(d_mean[0]), d_rc=_rnd(d_mean[1]), d_is=_rnd(d_mean[2], 6), worst_d_ds=_rnd(worst),
+                d_ds_ci95=(_rnd(ci[0, 0]), _rnd(ci[1, 0])), d_rc_ci95=(_rnd(ci[0, 1]), _rnd(ci[1, 1])),
+                pdr_ds=relative_drop(base_mean[0], d_mean[0]), pdr_rc=relative_drop(base_mean[1], d_mean[1]))
+
+
+def _family_stats(p: _Pairs, *, p_value: float | None, n_boot: int, boot_seed: int, n_crashed: int,
+                  answers: bool, decisions: DecisionStats | None) -> FamilyStats:
+    ds, rc, is_, rd, to = _absolute(p.paired)
+    return FamilyStats(
+        ds=ds, rc=rc, is_=is_, base_ds=_mean([b.ds for b in p.pair_base]),
+        base_rc=_mean([b.rc for b in p.pair_base]), base_is=_mean([b.is_ for b in p.pair_base], 6),
+        **_deltas(p, n_boot, boot_seed), p_value_raw=p.p_value_raw, rd=rd, to=to, n=len(p.paired),
+        n_routes=len(p.deltas), baseline_done_variant_failed=p.failed_routes,
+        n_pairs=int(sum(len(d) for d in p.deltas)), n_crashed=int(n_crashed),
+        unpaired=p.finished - len(p.paired), flips=Flips(p.lost, p.gained), p_value=p_value,
+        answers=_answers(p.paired) if answers else None, decisions=decisions)
 
 
 def relative_drop(base_mean: float, delta_mean: float) -> float | None:
@@ -201,44 +236,80 @@ def holm(p_values: Sequence[float | None]) -> list[float | None]:
     return out
 
 
+@dataclass(frozen=True)
+class _Attribution:
+    """What the decision statistics of a row are computed from: key -> the decisions of each
+    finished episode and, for a language-model agent, key -> its (instructed intent, answered
+    maneuver) pairs (None: no answers' confusion)."""
+
+    decisions: Mapping[Key, Sequence[Decision]]
+    answers: Mapping[Key, Sequence[tuple[Any, Any]]] | None
+
+    def stats(self, recs: Sequence[EpisodeRecord], family: bool, asked: bool) -> DecisionStats:
+        """The decision statistics of ``recs`` (one agent's episodes of one family); compliance
+        for a variant family alone, the answers' confusion for an agent that asked a model."""
+        st = block_stats(self.decisions[k] for r in recs if (k := episode_key(r)) in self.decisions)
+        answers = None
+        if asked and self.answers is not None:
+            answers = answer_confusion(self.answers[k] for r in recs if (k := episode_key(r)) in self.answers)
+        return replace(st, compliance=st.compliance if family else None, answers=answers)
+
+
+def _agent_stats(recs: list[EpisodeRecord], fams: tuple[str, ...], n_boot: int, boot_seed: int,
+                 attribution: _Attribution | None) -> AgentStats:
+    """One agent's rows from its records ``recs`` (crashed ones included)."""
+    crashed = Counter(r.family for r in recs if r.status == "crashed")
+    mine = [r for r in recs if r.status != "crashed"]
+    base_recs = [r for r in mine if r.family == BASELINE]
+    base = {(r.route_id, r.seed): r for r in base_recs if r.k == 0}
+    asked = any(r.model_calls for r in mine)
+
+    def decisions(family: str) -> DecisionStats | None:
+        if attribution is None:
+            return None
+        return attribution.stats([r for r in recs if r.family == family], family != BASELINE, asked)
+
+    pairs = {f: _Pairs.of([r for r in mine if r.family == f], base) for f in fams}
+    adjusted = holm([pairs[f].p_value_raw for f in fams])
+    families = {f: _family_stats(pairs[f], p_value=_rnd(p, 6), n_boot=n_boot, boot_seed=boot_seed,
+                                 n_crashed=crashed[f], answers=asked, decisions=decisions(f))
+                for f, p in zip(fams, adjusted)}
+    ds, rc, is_, rd, to = _absolute(base_recs)
+    baseline = BaselineStats(ds, rc, is_, rd, to, len(base_recs), crashed[BASELINE],
+                             _answers(base_recs) if asked else None, decisions(BASELINE))
+    return AgentStats(baseline, families)
+
+
 def summarize(records: Iterable[EpisodeRecord], *, suite: str, seed: int, k: int,
-              families: Sequence[str] = FAMILIES, n_boot: int = 2000, boot_seed: int = 2026) -> dict:
+              families: Sequence[str] = FAMILIES, n_boot: int = 2000, boot_seed: int = 2026,
+              scoring: str | None = None, digest: str | None = None,
+              decisions: Mapping[Key, Sequence[Decision]] | None = None,
+              answers: Mapping[Key, Sequence[tuple[Any, Any]]] | None = None,
+              rescored_short: int = 0, not_in_report: int = 0, not_in_report_why: str = "") -> Summary:
     """ICR-Drive summary of an evaluation (see the module docstring for the definitions).
 
     Only baseline records and records of ``families`` are considered; agents are listed in
     sorted order, families in the given order. ``n_routes`` is the number of routes that
     contribute paired deltas, ``n_pairs`` (extra) the number of (route, k) pairs.
+    ``scoring`` and ``digest``: the rules the records are scored by and the run's digest
+    (written together; None: neither). ``decisions`` (key -> the decisions of a finished
+    episode, :func:`icrsumo.attribution.episode_key`): every row gets its decision statistics
+    (None: none does); ``answers``: a language-model agent's (intent, maneuver) pairs by key
+    for its rows' answers' confusion. ``rescored_short``, ``not_in_report`` and its
+    ``not_in_report_why``: counted in :class:`icrsumo.summary.EpisodeCounts`.
     """
     fams = tuple(families)
     if BASELINE in fams:
         raise ValueError("families must not include 'baseline'")
     recs = [r for r in _sorted_unique(records) if r.family == BASELINE or r.family in fams]
     n_crashed = sum(r.status == "crashed" for r in recs)
-    agents: dict[str, Any] = {}
-    for agent in sorted({r.agent for r in recs}):
-        crashed = Counter(r.family for r in recs if r.agent == agent and r.status == "crashed")
-        mine = [r for r in recs if r.agent == agent and r.status != "crashed"]
-        base_recs = [r for r in mine if r.family == BASELINE]
-        base = {(r.route_id, r.seed): r for r in base_recs if r.k == 0}
-        answers = any(r.model_calls for r in mine)
-        blocks = {f: _family_block([r for r in mine if r.family == f], base, n_boot=n_boot,
-                                   boot_seed=boot_seed, n_crashed=crashed[f], answers=answers) for f in fams}
-        adjusted = holm([blocks[f]["p_value_raw"] for f in fams])
-        for f, p in zip(fams, adjusted):
-            blocks[f]["p_value"] = _rnd(p, 6)
-        agents[agent] = {"baseline": {**_absolute(base_recs), "n_crashed": crashed[BASELINE],
-                                      **(_answers(base_recs) if answers else {})},
-                         "families": blocks}
-    return {
-        "suite": str(suite),
-        "seed": int(seed),
-        "k": int(k),
-        "episodes": {"done": len(recs) - n_crashed, "crashed": n_crashed},
-        "agents": agents,
-        "families": list(fams),
-        "n_boot": int(n_boot),
-        "boot_seed": int(boot_seed),
-    }
+    attribution = None if decisions is None else _Attribution(decisions, answers)
+    agents = {agent: _agent_stats([r for r in recs if r.agent == agent], fams, n_boot, boot_seed, attribution)
+              for agent in sorted({r.agent for r in recs})}
+    episodes = EpisodeCounts(len(recs) - n_crashed, n_crashed, rescored_short, not_in_report,
+                             not_in_report_why)
+    return Summary(str(suite), int(seed), int(k), episodes, agents, fams, int(n_boot), int(boot_seed),
+                   scoring, digest)
 
 
 EPISODE_COLUMNS = ("agent", "route_id", "family", "k", "seed", "status", "ds", "rc", "is",

@@ -43,11 +43,12 @@ from .evaluation.run import (
     run_queue,
     with_factories,
 )
-from .fsio import FolderLock, bounded_name, dumps_json, read_json, write_atomic
+from .fsio import FolderLock, bounded_name, dumps_json, write_atomic
 from .instructions.banks import load_banks
 from .instructions.rewrites import rewrite_pool
 from .instructions.store import read_route_file, route_document
 from .store import ResultStore
+from .summary import Summary
 from .types import Instruction, InstructionSet
 from .vocab import Family
 
@@ -111,6 +112,8 @@ class AttackOptions:
                 "not an evaluate out folder (no results.sqlite)",
                 f"pass the {Field('out')} folder of an icrsumo evaluate run on the same suite",
             )
+        if self.compare is not None:  # read before any episode runs: its grid ends the report
+            Summary.read(Path(self.compare) / "summary.json")
         replace(self.eval_options(), families=("paraphrase",)).check()
 
 
@@ -340,8 +343,9 @@ def _grid(compare: Path | None, agent: str) -> dict | None:
     worst ΔDS and the routes any of their variants broke."""
     if compare is None:
         return None
-    summary = read_json(Path(compare) / "summary.json", "evaluation summary", "run icrsumo report on it")
-    fams = summary.get("agents", {}).get(agent, {}).get("families", {})
+    summary = Summary.read(Path(compare) / "summary.json")
+    a = summary.agents.get(agent)
+    fams = a.families if a is not None else {}
     with ResultStore(Path(compare) / "results.sqlite", readonly=True) as store:
         recs = [r for r in store.records() if r.agent == agent]
     done = {r.route_id for r in recs if r.family == Family.BASELINE and r.termination_class == "done"}
@@ -355,7 +359,7 @@ def _grid(compare: Path | None, agent: str) -> dict | None:
             and r.termination_class != "done"
         }
     )
-    return {f: {"worst_dDS": fams[f].get("worst_dDS")} for f in ("paraphrase", "noise") if f in fams} | {
+    return {f: {"worst_dDS": fams[f].worst_d_ds} for f in ("paraphrase", "noise") if f in fams} | {
         "broken_routes": broken
     }
 
@@ -421,7 +425,7 @@ def _document(
 def attack_table(doc: dict) -> str:
     """Markdown: per agent the success rate, median queries, worst ΔDS (and the fixed grid's),
     then the transfer table."""
-    from .report import md_cell
+    from .reporting.cells import md_cell
 
     md = [
         f"Attack on {doc['suite']} (constraint {doc['constraint']}, budget {doc['budget']} per route, "

@@ -23,6 +23,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 from .decisions import Decision, divergence
+from .summary import DecisionStats
 from .types import EpisodeRecord
 from .vocab import DecisionOutcome, Family
 
@@ -30,11 +31,12 @@ from .vocab import DecisionOutcome, Family
 Key = tuple[str, str, str, int, int]
 
 
-def _key(r: EpisodeRecord) -> Key:
+def episode_key(r: EpisodeRecord) -> Key:
+    """The key of episode ``r`` in the decisions' mappings: (agent, route_id, family, k, seed)."""
     return (r.agent, r.route_id, str(r.family), r.k, r.seed)
 
 
-def block_stats(episodes: Iterable[Sequence[Decision]]) -> dict[str, Any]:
+def block_stats(episodes: Iterable[Sequence[Decision]]) -> DecisionStats:
     """Outcome counts, compliance, adherence and confusion over the decisions of ``episodes``."""
     counts = Counter({o.value: 0 for o in DecisionOutcome})
     contradicted = obeyed = reached = on_route = 0
@@ -50,12 +52,12 @@ def block_stats(episodes: Iterable[Sequence[Decision]]) -> dict[str, Any]:
                 contradicted += 1
                 obeyed += d.outcome == DecisionOutcome.FOLLOWED_TEXT
             confusion.setdefault(d.text_intent.value, Counter())[d.executed.value] += 1
-    return {
-        "decisions": {o.value: counts[o.value] for o in DecisionOutcome},
-        "compliance": round(obeyed / contradicted, 4) if contradicted else None,
-        "adherence": round(on_route / reached, 4) if reached else None,
-        "confusion": {t: dict(sorted(c.items())) for t, c in sorted(confusion.items())},
-    }
+    return DecisionStats(
+        decisions={o.value: counts[o.value] for o in DecisionOutcome},
+        adherence=round(on_route / reached, 4) if reached else None,
+        confusion={t: dict(sorted(c.items())) for t, c in sorted(confusion.items())},
+        compliance=round(obeyed / contradicted, 4) if contradicted else None,
+    )
 
 
 def flips(records: Sequence[EpisodeRecord], decisions: Mapping[Key, Sequence[Decision]]) -> list[dict]:
@@ -63,12 +65,12 @@ def flips(records: Sequence[EpisodeRecord], decisions: Mapping[Key, Sequence[Dec
     done = {(r.agent, r.route_id, r.seed) for r in records
             if r.family == Family.BASELINE and r.status == "done" and r.termination_class == "done"}
     rows = []
-    for r in sorted(records, key=_key):
+    for r in sorted(records, key=episode_key):
         if r.family == Family.BASELINE or r.status != "done" or r.termination_class == "done":
             continue
-        if (r.agent, r.route_id, r.seed) not in done or _key(r) not in decisions:
+        if (r.agent, r.route_id, r.seed) not in done or episode_key(r) not in decisions:
             continue
-        d = divergence(decisions[_key(r)])
+        d = divergence(decisions[episode_key(r)])
         rows.append({
             "agent": r.agent, "route_id": r.route_id, "family": str(r.family), "k": r.k, "seed": r.seed,
             "termination": str(r.termination),
@@ -113,24 +115,9 @@ def answer_confusion(pairs: Iterable[Sequence[tuple[Any, Any]]]) -> dict[str, di
     return {t: dict(sorted(c.items())) for t, c in sorted(table.items())}
 
 
-def attach(summary: dict, records: Sequence[EpisodeRecord],
-           decisions: Mapping[Key, Sequence[Decision]],
-           answers: Mapping[Key, Sequence[tuple[Any, Any]]] | None = None) -> dict:
-    """Add the decision statistics (and, for a language-model agent's blocks, the answers'
-    confusion from ``answers``: key -> (instructed intent, maneuver) pairs) to every block of
-    ``summary`` (in place, returned) and return the attribution document: {"flips": [...],
-    "templates": [...]}."""
-    for agent, a in summary["agents"].items():
-        for fam, block in [(Family.BASELINE, a["baseline"]), *a["families"].items()]:
-            mine = [r for r in records if r.agent == agent and r.family == fam]
-            eps = [decisions[_key(r)] for r in mine if _key(r) in decisions]
-            stats = block_stats(eps)
-            block["decisions"] = stats["decisions"]
-            block["adherence"] = stats["adherence"]
-            block["confusion"] = stats["confusion"]
-            if fam != Family.BASELINE:
-                block["compliance"] = stats["compliance"]
-            if "invalid_rate" in block and answers is not None:
-                block["answers"] = answer_confusion(answers[_key(r)] for r in mine if _key(r) in answers)
+def attribution_doc(records: Sequence[EpisodeRecord], decisions: Mapping[Key, Sequence[Decision]]) -> dict:
+    """The attribution document (attribution.json): {"flips": [...], "templates": [...]}. The
+    rows' decision statistics are in the summary (:func:`icrsumo.aggregate.summarize`, given the
+    same ``decisions``)."""
     rows = flips(records, decisions)
     return {"flips": rows, "templates": template_ranking(rows, decisions)}

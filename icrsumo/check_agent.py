@@ -151,9 +151,8 @@ def _drive(factory: Callable, caller: ThreadWatch, scenario, iset, timeout: floa
     return run
 
 
-def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUITE, timeout: float = 10.0,
-                max_act_ms: float = MAX_ACT_MS, max_decisions: int = MAX_DECISIONS) -> CheckReport:
-    """Check agent ``spec``; InputError when the spec cannot be loaded at all (bad input)."""
+def _check_limits(timeout: float, max_act_ms: float, max_decisions: int) -> None:
+    """InputError unless the time limits are positive numbers and ``max_decisions`` at least 1."""
     for option, value in ((Field("timeout"), timeout), (Field("max_act_ms"), max_act_ms)):
         if not 0 < value < float("inf"):
             unit = "seconds" if option == Field("timeout") else "milliseconds"
@@ -162,44 +161,34 @@ def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUIT
     if max_decisions < 1:
         raise InputError(Field("max_decisions"), str(max_decisions), "must be at least 1",
                          "give a positive count")
-    found: list[Finding] = []
 
-    def report() -> CheckReport:
-        return CheckReport(spec, route, tuple(found))
 
-    # 1. load
+def _load(spec: str) -> tuple[Callable, type | None, Finding]:
+    """Step 1: the spec's factory, its class (None where the factory is no class) and the finding
+    that it loaded; InputError when it cannot be loaded."""
     if spec in BUILTIN or spec.startswith((REMOTE_PREFIX, LLM_PREFIX)):
         factory = agent_factory(spec)
-        found.append(Finding(True, f"{spec}: loaded"))
-        cls = factory if isinstance(factory, type) else None
-    else:
-        cls = factory = load_class(spec)
-        found.append(Finding(True, f"class {spec.rpartition(':')[2]} loaded from {spec.rpartition(':')[0]}"))
-    # 2. protocol members of the class
-    if cls is not None:
-        missing = [m for m in ("reset", "act") if not callable(getattr(cls, m, None))]
-        for m in missing:
+        return factory, factory if isinstance(factory, type) else None, Finding(True, f"{spec}: loaded")
+    cls = load_class(spec)
+    return cls, cls, Finding(True, f"class {spec.rpartition(':')[2]} loaded from {spec.rpartition(':')[0]}")
+
+
+def _missing_methods(cls: type | None) -> list[Finding]:
+    """Step 2: a problem for each protocol method the class lacks."""
+    if cls is None:
+        return []
+    found = []
+    for m in ("reset", "act"):
+        if not callable(getattr(cls, m, None)):
             sig = "reset(self, info: EpisodeInfo) -> None" if m == "reset" else \
                 "act(self, obs: Observation) -> Action"
             found.append(Finding(False, f"missing method {m}(): add `def {sig}`"))
-        if missing:
-            return report()
-    # 3. scenario and the first run
-    sc_dir, instr = bundled_route(route, suite)
-    from .instructions.store import read_instruction_sets
-    from .scenario import read_scenario
+    return found
 
-    scenario = read_scenario(sc_dir)
-    iset = read_instruction_sets(instr)[0]
-    caller = ThreadWatch(timeout)
-    try:
-        probe, _ = _timed(caller, factory)
-    except AgentTimeout:
-        found.append(Finding(False, f"creating the agent did not finish within {timeout:g} s"))
-        return report()
-    except (Exception, SystemExit) as err:
-        found.append(Finding(False, _raised(f"creating the agent ({spec.rpartition(':')[2]}())", err)))
-        return report()
+
+def _attributes(probe: object) -> list[Finding]:
+    """Step 3: the instance's ``name`` and ``privileged`` attributes."""
+    found = []
     name, privileged = getattr(probe, "name", None), getattr(probe, "privileged", None)
     if not isinstance(name, str) or not name:
         found.append(Finding(False, "no `name` attribute (a non-empty string): results would be stored under "
@@ -214,73 +203,111 @@ def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUIT
                                    "built-in baselines do; an agent under test sets privileged = False"))
     else:
         found.append(Finding(True, "privileged = False"))
-    if callable(getattr(probe, "close", None)):
-        with contextlib.suppress(Exception):  # a later run reports close() problems
-            _timed(caller, probe.close)
-    first = _drive(factory, caller, scenario, iset, timeout, max_decisions, keep_obs=4)
-    runs = f"{len(first.actions)} decisions on {scenario.route_id} ({first.termination or 'not finished'})"
-    if first.problem:
-        found.append(Finding(False, first.problem))
-        if first.hung:
-            return report()
-    else:
-        found.append(Finding(True, f"actions valid: {runs}"))
-    # 4. determinism: a second fresh instance, same seed
-    second = _drive(factory, caller, scenario, iset, timeout, max_decisions, keep_obs=0)
-    if second.hung:
-        found.append(Finding(False, second.problem))
-        return report()
+    return found
+
+
+def _determinism(first: _Run, second: _Run) -> Finding | None:
+    """Step 4: whether a second fresh instance with the same seed acted the same (None: nothing
+    to say, the first run had a problem and the runs agree)."""
     diff = next((i for i, (a, b) in enumerate(zip(first.actions, second.actions)) if not _same(a, b)), None)
     if diff is None and len(first.actions) != len(second.actions) and not (first.problem and second.problem):
         diff = min(len(first.actions), len(second.actions))
     if diff is not None:
         a = _show(first.actions[diff]) if diff < len(first.actions) else first.problem or "(run ended)"
         b = _show(second.actions[diff]) if diff < len(second.actions) else second.problem or "(run ended)"
-        found.append(Finding(False, f"not deterministic: two runs with the same seed differ at decision "
-                                    f"{diff + 1}: {a} vs {b} (draw randomness from "
-                                    f"numpy.random.default_rng(info.seed) in reset, never a global RNG)"))
-    elif not first.problem:
-        found.append(Finding(True, f"deterministic: a second run with the same seed gave the same "
-                                   f"{len(second.actions)} actions"))
-    # 5. speed
-    times = first.act_s + second.act_s
-    if times:
-        mean_ms, worst_ms = 1000 * float(np.mean(times)), 1000 * float(np.max(times))
-        if mean_ms > max_act_ms:
-            hours = mean_ms / 1000 * DEFAULT_RUN_EPISODES * 300 / 3600  # ~300 decisions per tiny episode
-            found.append(Finding(False, f"too slow: act() takes {mean_ms:.0f} ms on average (max "
-                                        f"{worst_ms:.0f} ms), over the {max_act_ms:g} ms budget "
-                                        f"(--max-act-ms); the default evaluation would spend about "
-                                        f"{hours:.1f} h in act()"))
-        else:
-            found.append(Finding(True, f"speed: act() {mean_ms:.2f} ms on average (max {worst_ms:.2f} ms)"))
-    # 6. the optional act_batch hook: two fresh sessions fed run 1's observations in step
+        return Finding(False, f"not deterministic: two runs with the same seed differ at decision "
+                              f"{diff + 1}: {a} vs {b} (draw randomness from "
+                              f"numpy.random.default_rng(info.seed) in reset, never a global RNG)")
+    if not first.problem:
+        return Finding(True, f"deterministic: a second run with the same seed gave the same "
+                             f"{len(second.actions)} actions")
+    return None
+
+
+def _speed(times: list[float], max_act_ms: float) -> Finding | None:
+    """Step 5: the mean time of ``act`` against the budget (None: no act call finished)."""
+    if not times:
+        return None
+    mean_ms, worst_ms = 1000 * float(np.mean(times)), 1000 * float(np.max(times))
+    if mean_ms > max_act_ms:
+        hours = mean_ms / 1000 * DEFAULT_RUN_EPISODES * 300 / 3600  # ~300 decisions per tiny episode
+        return Finding(False, f"too slow: act() takes {mean_ms:.0f} ms on average (max "
+                              f"{worst_ms:.0f} ms), over the {max_act_ms:g} ms budget "
+                              f"(--max-act-ms); the default evaluation would spend about "
+                              f"{hours:.1f} h in act()")
+    return Finding(True, f"speed: act() {mean_ms:.2f} ms on average (max {worst_ms:.2f} ms)")
+
+
+def _batch_hook(probe: object, factory: Callable, caller: ThreadWatch, first: _Run,
+                timeout: float) -> Finding | None:
+    """Step 6: the optional ``act_batch`` hook, two fresh sessions fed the first run's observations
+    in step, against what ``act`` returned (None: no hook, or no observation to feed)."""
     hook = batch_hook(type(probe))
-    if first.observations and hook is not None:
-        try:
-            pair = [_timed(caller, factory)[0] for _ in range(2)]
-            for a in pair:
-                _timed(caller, a.reset, first.info)
-            for i, o in enumerate(first.observations):
-                batch, _ = _timed(caller, hook, pair, [o, o])
-                if not isinstance(batch, (list, tuple)) or len(batch) != 2:
-                    found.append(Finding(False, "act_batch() must return one action per observation "
-                                                "(a list of 2 for 2)"))
-                    break
-                if not all(_same(validate_action(a), first.actions[i]) for a in batch):
-                    found.append(Finding(False, f"act_batch() returns other actions than act() at decision "
-                                                f"{i + 1}: served remotely it would drive differently"))
-                    break
-            else:
-                found.append(Finding(True, f"act_batch() matches act() over {len(first.observations)} "
-                                           f"decisions of 2 sessions"))
-        except AgentTimeout:
-            found.append(Finding(False, f"act_batch() did not answer within {timeout:g} s"))
-        except (Exception, SystemExit) as err:
-            found.append(Finding(False, _raised("act_batch()", err)))
-    # 7. CPU independence (one line): what an exact checkpoint proves, what others cannot promise
-    found.append(_cpu_independence(probe, first.observations))
-    return report()
+    if not first.observations or hook is None:
+        return None
+    try:
+        pair = [_timed(caller, factory)[0] for _ in range(2)]
+        for a in pair:
+            _timed(caller, a.reset, first.info)
+        for i, o in enumerate(first.observations):
+            batch, _ = _timed(caller, hook, pair, [o, o])
+            if not isinstance(batch, (list, tuple)) or len(batch) != 2:
+                return Finding(False, "act_batch() must return one action per observation "
+                                      "(a list of 2 for 2)")
+            if not all(_same(validate_action(a), first.actions[i]) for a in batch):
+                return Finding(False, f"act_batch() returns other actions than act() at decision "
+                                      f"{i + 1}: served remotely it would drive differently")
+        return Finding(True, f"act_batch() matches act() over {len(first.observations)} "
+                             f"decisions of 2 sessions")
+    except AgentTimeout:
+        return Finding(False, f"act_batch() did not answer within {timeout:g} s")
+    except (Exception, SystemExit) as err:
+        return Finding(False, _raised("act_batch()", err))
+
+
+def check_agent(spec: str, route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUITE, timeout: float = 10.0,
+                max_act_ms: float = MAX_ACT_MS, max_decisions: int = MAX_DECISIONS) -> CheckReport:
+    """Check agent ``spec``; InputError when the spec cannot be loaded at all (bad input)."""
+    _check_limits(timeout, max_act_ms, max_decisions)
+    factory, cls, loaded = _load(spec)
+    missing = _missing_methods(cls)
+    found = [loaded, *missing]
+
+    def report(*more: Finding | None) -> CheckReport:
+        return CheckReport(spec, route, tuple(found) + tuple(f for f in more if f is not None))
+
+    if missing:
+        return report()
+    # 3. scenario, a probe instance and the first run
+    sc_dir, instr = bundled_route(route, suite)
+    from .instructions.store import read_instruction_sets
+    from .scenario import read_scenario
+
+    scenario = read_scenario(sc_dir)
+    iset = read_instruction_sets(instr)[0]
+    caller = ThreadWatch(timeout)
+    try:
+        probe, _ = _timed(caller, factory)
+    except AgentTimeout:
+        return report(Finding(False, f"creating the agent did not finish within {timeout:g} s"))
+    except (Exception, SystemExit) as err:
+        return report(Finding(False, _raised(f"creating the agent ({spec.rpartition(':')[2]}())", err)))
+    found += _attributes(probe)
+    if callable(getattr(probe, "close", None)):
+        with contextlib.suppress(Exception):  # a later run reports close() problems
+            _timed(caller, probe.close)
+    first = _drive(factory, caller, scenario, iset, timeout, max_decisions, keep_obs=4)
+    runs = f"{len(first.actions)} decisions on {scenario.route_id} ({first.termination or 'not finished'})"
+    found.append(Finding(False, first.problem) if first.problem else Finding(True, f"actions valid: {runs}"))
+    if first.hung:
+        return report()
+    second = _drive(factory, caller, scenario, iset, timeout, max_decisions, keep_obs=0)
+    if second.hung:
+        return report(Finding(False, second.problem))
+    # 4. to 7.: determinism, speed, the act_batch hook, CPU independence
+    return report(_determinism(first, second), _speed(first.act_s + second.act_s, max_act_ms),
+                  _batch_hook(probe, factory, caller, first, timeout),
+                  _cpu_independence(probe, first.observations))
 
 
 def _cpu_independence(agent: object, observations: list) -> Finding:

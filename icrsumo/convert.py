@@ -193,7 +193,11 @@ def _source_hash(spec: RouteSpec, net_sha: str, opts: ConvertOptions) -> str:
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
 
 
-def _sumocfg(net_rel: str, route_files: list[str], seed: int, end: float, max_vehicles: int = -1) -> str:
+def sumocfg_xml(net_rel: str, route_files: list[str], seed: int, end: float, max_vehicles: int = -1) -> str:
+    """The text of a converted scenario's ``.sumocfg``: network ``net_rel`` and ``route_files``
+    (paths as written in the file), SUMO seed ``seed``, simulation end ``end`` (s), the
+    background fleet capped at ``max_vehicles`` (-1: no cap), and the benchmark's fixed
+    processing options (step length, collisions, teleports, impatience)."""
     # collision.mingap-factor 0: a collision is a contact (gap < 0); SUMO's default also counts a
     # same-lane gap below the follower's minGap (2.5 m), which is no contact (see README,
     # *Fidelity on CARLA's towns*). max-num-vehicles caps the background fleet (traffic.fleet_cap;
@@ -282,7 +286,7 @@ def _convert_one(
             route_files = ["ego.rou.xml"] + [f for f in (traffic.vehicles, traffic.pedestrians) if f]
             (staging / "ego.rou.xml").write_text(_ego_routes(route.edges), encoding="utf-8")
             (staging / "scenario.sumocfg").write_text(
-                _sumocfg(net_rel, route_files, seed, end, cap), encoding="utf-8")
+                sumocfg_xml(net_rel, route_files, seed, end, cap), encoding="utf-8")
             manifest = {
                 "format": SCENARIO_FORMAT,
                 "route_id": spec.id,

@@ -17,8 +17,8 @@ class Field:
     """A field of the options a call takes, by its Python name (``suite``, ``rollout_route``):
     what an :class:`InputError` is about (its first argument), or a mention of one in its text
     (``f"use another {Field('out')} folder"``). The error names it in its reader's words: the
-    Python API by the keyword (``out``), the CLI by its option (``--out``, ``icrsumo.cli``
-    maps them)."""
+    Python API by the keyword (``out``), the CLI by its option (``--out``,
+    ``icrsumo.app.options`` maps them)."""
 
     name: str
 

@@ -124,9 +124,14 @@ def read_json(path: Path, what: str, fix: str = "") -> Any:
     """A user's JSON file (:func:`read_text` and strict JSON: no NaN / Infinity, no key twice in
     one object, no lone surrogate in a string); InputErrors name the file, the line and column of
     a syntax error, and ``fix``."""
+    return loads_json(read_text(path, what, fix), path, what, fix)
+
+
+def loads_json(text: str, path: object, what: str, fix: str = "") -> Any:
+    """The strict JSON document ``text`` (as :func:`read_json` reads a file's); InputErrors name
+    ``path`` (the file, or where the text came from)."""
     from .errors import InputError
 
-    text = read_text(path, what, fix)
     try:
         doc = json.loads(text, parse_constant=no_constants, object_pairs_hook=no_duplicates)
     except RecursionError:

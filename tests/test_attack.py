@@ -67,3 +67,15 @@ def test_bad_attack_options_are_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "--budget: 0: out of range" in err[0]
     assert not (tmp_path / "o").exists()
+
+
+def test_a_compare_folder_with_a_malformed_summary_is_refused_before_any_episode(tmp_path, capsys):
+    grid = tmp_path / "grid"
+    grid.mkdir()
+    (grid / "results.sqlite").write_bytes(b"")
+    (grid / "summary.json").write_text(json.dumps({"suite": "tiny", "seed": 1, "k": 1}), encoding="utf-8")
+    code = main(["attack", "--compare", str(grid), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert f"{grid / 'summary.json'}: top level: missing key 'episodes'" in err[0]
+    assert not (tmp_path / "o").exists()

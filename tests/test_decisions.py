@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from records_example import rec
 
-from icrsumo.attribution import attach, block_stats, flips, template_ranking
+from icrsumo.aggregate import summarize
+from icrsumo.attribution import attribution_doc, block_stats, flips, template_ranking
 from icrsumo.decisions import classify_decisions, divergence, turn_of
 from icrsumo.types import EpisodeLog, Instruction, InstructionSet, Intent, Maneuver
 from icrsumo.vocab import DecisionOutcome as O
@@ -103,9 +104,9 @@ def test_aggregation_compliance_confusion_flips_and_templates():
     resist = classify_decisions(MANEUVERS, _set("Turn right.", template="M.left.p02"),
                                 _log(300.0, Termination.COMPLETED))
     st = block_stats([obey, resist])
-    assert st["decisions"] == {"followed_route": 3, "followed_text": 1, "other": 0, "not_reached": 2}
-    assert st["compliance"] == 0.5 and st["adherence"] == 0.75
-    assert st["confusion"]["right"] == {"left": 1, "right": 1}
+    assert st.decisions == {"followed_route": 3, "followed_text": 1, "other": 0, "not_reached": 2}
+    assert st.compliance == 0.5 and st.adherence == 0.75
+    assert st.confusion["right"] == {"left": 1, "right": 1}
     records = [rec("a", "r1", "baseline", 0, 100, 100), rec("a", "r1", "misleading", 0, 20, 20, cls="RD"),
                rec("a", "r1", "misleading", 1, 100, 100)]
     decisions = {("a", "r1", "baseline", 0, 7): base, ("a", "r1", "misleading", 0, 7): obey,
@@ -118,9 +119,12 @@ def test_aggregation_compliance_confusion_flips_and_templates():
     ranking = template_ranking(rows, decisions)
     assert ranking[0] == {"family": "misleading", "template": "M.left.p01", "flips": 1, "uses": 1,
                           "flip_rate": 1.0, "example": "Turn right."}
-    summary = {"agents": {"a": {"baseline": {}, "families": {"misleading": {}}}}}
-    doc = attach(summary, records, decisions)
-    fam = summary["agents"]["a"]["families"]["misleading"]
-    assert fam["compliance"] == 0.5 and "compliance" not in summary["agents"]["a"]["baseline"]
-    assert summary["agents"]["a"]["baseline"]["decisions"]["followed_route"] == 3
-    assert doc["flips"] == rows
+    summary = summarize(records, suite="t", seed=7, k=2, families=("misleading",), n_boot=10,
+                        decisions=decisions)
+    a = summary.agents["a"]
+    assert a.families["misleading"].decisions.compliance == 0.5 and a.baseline.decisions.compliance is None
+    assert "compliance" not in summary.to_dict()["agents"]["a"]["baseline"]
+    assert a.baseline.decisions.decisions["followed_route"] == 3
+    bare = summarize(records, suite="t", seed=7, k=2, families=("misleading",), n_boot=10)
+    assert bare.agents["a"].baseline.decisions is None  # without decisions, no statistics
+    assert attribution_doc(records, decisions) == {"flips": rows, "templates": ranking}

@@ -60,3 +60,12 @@ def test_the_evaluate_synopsis_names_every_option():
     synopsis = page.split("```")[1]
     missing = sorted(f for f in flags - {"--help"} if not re.search(re.escape(f) + r"(?![\w-])", synopsis))
     assert not missing, f"docs/evaluate.md's synopsis lacks {missing}"
+
+
+def test_every_developer_tool_is_listed():
+    """docs/development.md's table names every script in tools/ (what it does, who runs it)."""
+    page = (ROOT / "docs" / "development.md").read_text(encoding="utf-8")
+    table = page.split("## Developer tools", 1)[1]
+    missing = sorted(p.name for p in (ROOT / "tools").iterdir()
+                     if p.suffix in (".py", ".sh") and f"`{p.name}`" not in table)
+    assert missing == []

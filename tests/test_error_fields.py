@@ -1,11 +1,12 @@
 """Errors name fields, not command-line options: the library's InputErrors carry the field
 they are about (:class:`icrsumo.errors.Field`); the Python API names it by its keyword, the
-command line by its option (one table in :mod:`icrsumo.cli`); no module but icrsumo/cli.py
-names an option in an error's text; ``icrsumo.run_episode`` refuses what ``icrsumo run-episode``
-refuses; the parser is one small function per subcommand."""
+command line by its option (one table in :mod:`icrsumo.app.options`); no module but the command
+line's (icrsumo/app/, icrsumo/cli.py) names an option in an error's text; ``icrsumo.run_episode``
+refuses what ``icrsumo run-episode`` refuses; the parser is one small module per subcommand."""
 
 from __future__ import annotations
 
+import argparse
 import ast
 import inspect
 import json
@@ -17,8 +18,9 @@ from pathlib import Path
 import pytest
 
 import icrsumo
-from icrsumo import cli
-from icrsumo.cli import main
+import icrsumo.app
+from icrsumo.app import options
+from icrsumo.cli import build_parser, main
 from icrsumo.errors import Field, InputError
 from icrsumo.resources import bundled_suites
 
@@ -69,8 +71,12 @@ def _options_named(source: str, rel: str) -> list[str]:
     return found
 
 
+#: the command line's modules, which name options
+CLI = [PACKAGE / "cli.py", *sorted((PACKAGE / "app").glob("*.py"))]
+
+
 def test_no_module_but_the_cli_names_an_option_in_an_error():
-    modules = [p for p in sorted(PACKAGE.rglob("*.py")) if p != PACKAGE / "cli.py"]
+    modules = [p for p in sorted(PACKAGE.rglob("*.py")) if p not in CLI]
     assert len(modules) > 50
     assert [line for p in modules for line in _options_named(p.read_text(encoding="utf-8"),
                                                               p.relative_to(PACKAGE).as_posix())] == []
@@ -113,11 +119,11 @@ def test_an_error_keeps_its_fields_across_processes():
     back = pickle.loads(pickle.dumps(err))
     assert back.field == "rollout_route" and str(back) == str(err)
     assert str(back) == "rollout_route: r9: not a route of this evaluation (fix: use one of the routes)"
-    assert back.line(cli._names("evaluate")) == ("--rollout-route: r9: not a route of this evaluation "
+    assert back.line(options.names("evaluate")) == ("--rollout-route: r9: not a route of this evaluation "
                                                  "(fix: use one of the --routes)")
     # a file is not a field, and a line given whole is kept as it is
     assert InputError(Path("a/routes.xml"), "route 1", "bad").field is None
-    assert InputError.of_line("a: b: c").line(cli._names("evaluate")) == "a: b: c"
+    assert InputError.of_line("a: b: c").line(options.names("evaluate")) == "a: b: c"
 
 
 def _other_route(instr: Path, tmp: Path) -> Path:
@@ -165,15 +171,26 @@ def test_run_episode_refuses_what_the_command_line_refuses(cache, tmp_path, caps
     assert python in str(raised.value)
 
 
-def test_the_parser_is_one_small_function_per_subcommand(capsys):
-    """Every subcommand's parser is its own function of under 120 lines, and the bundled
-    suites are named from the installation, never written out in the CLI."""
-    assert len(cli._SUBCOMMANDS) == len(cli.build_parser()._subparsers._group_actions[0].choices)
-    for add in (*cli._SUBCOMMANDS, cli.build_parser):
-        assert len(inspect.getsource(add).splitlines()) < 120, add.__name__
-    source = Path(cli.__file__).read_text(encoding="utf-8")
+def test_the_parser_is_one_small_module_per_subcommand(capsys):
+    """Every subcommand is its own module of :data:`icrsumo.app.SUBCOMMANDS`, whose functions are
+    each under 120 lines, and the bundled suites are named from the installation, never written
+    out in the CLI."""
+    added = []
+    for module in icrsumo.app.SUBCOMMANDS:
+        sub = argparse.ArgumentParser().add_subparsers()
+        module.add(sub)
+        assert len(sub.choices) == 1, module.__name__  # one subcommand per module
+        added += sub.choices
+    assert added == list(build_parser()._subparsers._group_actions[0].choices)
+    for module in icrsumo.app.SUBCOMMANDS:
+        functions = [f for _, f in inspect.getmembers(module, inspect.isfunction)
+                     if f.__module__ == module.__name__]
+        assert {"add", "run"} <= {f.__name__ for f in functions}, module.__name__
+        for f in functions:
+            assert len(inspect.getsource(f).splitlines()) < 120, f"{module.__name__}.{f.__name__}"
     names = "|".join(re.escape(name) for name in bundled_suites())
-    assert not re.search(rf"(\b({names})\b,\s*\"?\s*){{4}}", source)  # no list of them written out
+    for path in CLI:  # no list of them written out
+        assert not re.search(rf"(\b({names})\b,\s*\"?\s*){{4}}", path.read_text(encoding="utf-8")), path
     assert main(["convert-routes", "--help"]) == 0
     shown = " ".join(capsys.readouterr().out.split())
     assert all(name in shown for name in bundled_suites())

@@ -1,13 +1,16 @@
 """The package's import graph (every import statement, also those inside functions): no cycle,
-libsumo imported by the simulator backend alone, and no import from ``agents/`` or ``learn/``
+libsumo imported by the simulator backend alone, no import from ``agents/`` or ``learn/``
 into the closed loop's internals (they may use ``icrsumo.sim.episode`` and
-``icrsumo.sim.callbacks``, the loop's public side)."""
+``icrsumo.sim.callbacks``, the loop's public side), and the command line (``icrsumo.app``) on
+top, imported by nothing of the library."""
 
 from __future__ import annotations
 
 import ast
 import re
 from pathlib import Path
+
+import pytest
 
 import icrsumo
 
@@ -121,6 +124,25 @@ def test_agents_and_learn_stay_out_of_the_loop_internals():
     assert bad == []
 
 
+#: the application layer, the ``icrsumo`` command: ``icrsumo.app`` and its entry points
+APP = ("icrsumo.app", "icrsumo.cli", "icrsumo.__main__")
+
+
+def test_the_command_line_is_the_top_layer():
+    """Nothing of the library imports the command line: ``icrsumo.app`` is imported by its own
+    modules, ``icrsumo.cli`` and ``icrsumo.__main__`` alone, and the app never imports the
+    ``icrsumo.cli`` that re-exports it."""
+    graph = _graph()
+    assert "icrsumo.app.main" in graph["icrsumo.cli"]
+
+    def app(module: str) -> bool:
+        return any(module == top or module.startswith(top + ".") for top in APP)
+
+    bad = sorted((name, dep) for name, deps in graph.items() for dep in deps if app(dep) and not app(name))
+    assert bad == []
+    assert sorted(name for name, deps in graph.items() if "icrsumo.cli" in deps) == ["icrsumo.__main__"]
+
+
 def _top_level_names(path: Path) -> set[str]:
     names = set()
     for n in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
@@ -134,6 +156,21 @@ def _top_level_names(path: Path) -> set[str]:
 def test_only_the_backend_imports_libsumo():
     users = sorted(name for name, path in _modules().items() if "libsumo" in _top_level_names(path))
     assert users == ["icrsumo.sim.backend"]
+
+
+def test_only_the_renderer_imports_cv2():
+    users = sorted(name for name, path in _modules().items() if "cv2" in _top_level_names(path))
+    assert users == ["icrsumo.render.bev", "icrsumo.render.video"]
+
+
+def test_torch_and_matplotlib_stay_in_their_corners():
+    """torch: the learned agents' float side, GPU batching and the device check; matplotlib:
+    the report's figures (docs/layout.md)."""
+    torch = sorted(name for name, path in _modules().items() if "torch" in _top_level_names(path))
+    outside_learn = [n for n in torch if not n.startswith("icrsumo.learn.")]
+    assert outside_learn == ["icrsumo.agents.batched", "icrsumo.devices"]
+    plots = [name for name, path in _modules().items() if "matplotlib" in _top_level_names(path)]
+    assert plots and [n for n in plots if not n.startswith("icrsumo.reporting.")] == []
 
 
 def test_only_the_inference_runtime_imports_onnxruntime():
@@ -188,3 +225,96 @@ def test_the_bundled_suite_pipeline_keeps_its_old_name_and_one_default_suite():
                      for n in ast.parse(path.read_text(encoding="utf-8")).body if isinstance(n, ast.Assign)
                      for t in n.targets if isinstance(t, ast.Name) and t.id == "DEFAULT_SUITE")
     assert defined == ["icrsumo.defaults"]
+
+
+REPO = ROOT.parent
+#: the scripts outside the package: they use the package's public names alone (issue 44)
+SCRIPT_DIRS = ("tools", "benchmarks")
+
+
+def _private_uses(source: str, tools: set[str]) -> list[str]:
+    """Private names (``_x``, not dunders) of icrsumo or of the tools that ``source`` imports or
+    reads as an attribute of a module it imported (``from icrsumo.m import _x``, ``m._x``,
+    ``icrsumo.m._x``), each as ``line: module.name``."""
+    def ours(module: str) -> bool:
+        return module.split(".")[0] in {"icrsumo", *tools}
+
+    def private(name: str) -> bool:
+        return name.startswith("_") and not name.startswith("__")
+
+    tree = ast.parse(source)
+    bound: dict[str, str] = {}  # local name -> the module (or module's name) it stands for
+    found: list[str] = []
+    for n in ast.walk(tree):
+        if isinstance(n, ast.ImportFrom) and not n.level and ours(n.module or ""):
+            for a in n.names:
+                if private(a.name):
+                    found.append(f"{n.lineno}: {n.module}.{a.name}")
+                bound[a.asname or a.name] = f"{n.module}.{a.name}"
+        elif isinstance(n, ast.Import):
+            for a in n.names:
+                if ours(a.name):
+                    bound[a.asname or a.name.split(".")[0]] = a.name if a.asname else a.name.split(".")[0]
+    for n in ast.walk(tree):
+        if isinstance(n, ast.Attribute) and private(n.attr):
+            base = n.value
+            while isinstance(base, ast.Attribute):
+                base = base.value
+            if isinstance(base, ast.Name) and base.id in bound:
+                found.append(f"{n.lineno}: {ast.unparse(n)}")
+    return sorted(found)
+
+
+def test_the_private_name_scan_finds_every_form():
+    src = ("from icrsumo.convert import _sumocfg, ConvertOptions\n"
+           "import icrsumo.sim.drivable as d\nimport icrsumo.render\nfrom icrsumo.learn import minilm\n"
+           "from make_routes import _onward\nimport os\n"
+           "d._polygonal(1); icrsumo.render._layer; minilm._PARTS; os._exit; d.__name__; minilm.WIDTH\n")
+    assert _private_uses(src, {"make_routes"}) == [
+        "1: icrsumo.convert._sumocfg", "5: make_routes._onward",
+        "7: d._polygonal", "7: icrsumo.render._layer", "7: minilm._PARTS"]
+
+
+def test_tools_and_benchmarks_use_public_names_only():
+    """tools/ and benchmarks/ import only public names of icrsumo and of each other: what they
+    need is the package's (or the tool's) documented interface, not its internals."""
+    scripts = sorted(p for d in SCRIPT_DIRS for p in (REPO / d).glob("*.py"))
+    tools = {p.stem for p in scripts}
+    assert len(scripts) > 10
+    bad = [f"{p.relative_to(REPO)}:{use}" for p in scripts
+           for use in _private_uses(p.read_text(encoding="utf-8"), tools)]
+    assert bad == []
+
+
+def test_split_modules_keep_their_names_at_the_old_place():
+    """The modules split for size (issue 44) re-export every public name from where it was."""
+    import icrsumo.agents.driver
+    import icrsumo.agents.llm
+    import icrsumo.agents.llm_request
+    import icrsumo.agents.privileged
+    import icrsumo.agents.speed
+    import icrsumo.render
+    import icrsumo.render.bev
+    import icrsumo.render.video
+
+    assert icrsumo.agents.privileged.PathDriver is icrsumo.agents.driver.PathDriver
+    assert icrsumo.agents.privileged.arrival_time is icrsumo.agents.speed.arrival_time
+    assert icrsumo.agents.privileged.STANDING_WAIT == icrsumo.agents.speed.STANDING_WAIT
+    assert icrsumo.agents.privileged.HORIZON == icrsumo.agents.driver.HORIZON
+    assert icrsumo.agents.llm.parse_spec is icrsumo.agents.llm_request.parse_spec
+    assert icrsumo.agents.llm.Scene is icrsumo.agents.llm_request.Scene
+    assert icrsumo.render.BevRenderer is icrsumo.render.bev.BevRenderer
+    assert icrsumo.render.VideoWriter is icrsumo.render.video.VideoWriter
+    for module in (icrsumo.agents.privileged, icrsumo.agents.llm, icrsumo.render):
+        assert [n for n in module.__all__ if not hasattr(module, n)] == []
+
+
+def test_the_torch_models_keep_their_names_at_the_old_place():
+    pytest.importorskip("torch")
+    import icrsumo.learn.nets as nets
+    from icrsumo.learn.nets import checkpoint, models, policy, trainer
+
+    assert nets.Policy is policy.Policy and nets.onnx_bytes is policy.onnx_bytes
+    assert nets.Trainer is trainer.Trainer and nets.read_checkpoint is checkpoint.read_checkpoint
+    assert nets.BevLanguageNet is models.BevLanguageNet and nets.pick_device is models.pick_device
+    assert [n for n in nets.__all__ if not hasattr(nets, n)] == []

@@ -11,7 +11,6 @@ import pytest
 from records_example import FAMS, rec, tiny  # tests/ is on pytest's pythonpath
 
 from icrsumo.aggregate import summarize
-from icrsumo.fsio import dumps_json
 from icrsumo.report import (
     delta_bars,
     paired_rollout,
@@ -19,11 +18,12 @@ from icrsumo.report import (
     tables,
     write_report,
 )
+from icrsumo.summary import Summary
 from icrsumo.types import EpisodeLog
 
 
 @pytest.fixture(scope="module")
-def summary() -> dict:
+def summary() -> Summary:
     return summarize(tiny(), suite="tiny", seed=7, k=2, families=FAMS, n_boot=300)
 
 
@@ -62,8 +62,8 @@ def test_tables_md_csv_tex(summary):
     m = rows[5]
     assert float(m["dDS"]) == -41.6667 and float(m["worst_dDS"]) == -62.5 and float(m["RD_pct"]) == 66.67
     assert (m["n"], m["n_crashed"], m["unpaired"], float(m["base_DS"])) == ("3", "1", "2", 93.3333)
-    ci = summary["agents"]["B"]["families"]["misleading"]["dDS_ci95"]
-    assert (float(m["dDS_ci95_lo"]), float(m["dDS_ci95_hi"])) == tuple(ci)
+    ci = summary.agents["B"].families["misleading"].d_ds_ci95
+    assert (float(m["dDS_ci95_lo"]), float(m["dDS_ci95_hi"])) == ci
     assert rows[2]["DS"] == "" and rows[0]["dDS"] == ""
 
     tex = t["tex"]
@@ -125,7 +125,7 @@ def test_write_report(summary, tmp_path):
     recs = tiny()
     md = write_report(summary, recs, tmp_path)
     assert md == (tmp_path / "results.md").read_text(encoding="utf-8")
-    assert (tmp_path / "summary.json").read_text(encoding="utf-8") == dumps_json(summary)
+    assert (tmp_path / "summary.json").read_text(encoding="utf-8") == summary.to_json()
     for name in ("results.csv", "results.tex", "episodes.csv"):
         assert (tmp_path / name).stat().st_size > 100
     eps = list(csv.DictReader(io.StringIO((tmp_path / "episodes.csv").read_text(encoding="utf-8"))))

@@ -57,7 +57,7 @@ for p in (ROOT, ROOT / "tools"):
     if str(p) not in sys.path:
         sys.path.insert(0, str(p))
 
-from batched_inference import _get_info, _start_server, _stop_server, fmt, machine, stat  # noqa: E402
+from batched_inference import agent_info, fmt, machine, start_serve_agent, stat, stop_serve_agent  # noqa: E402
 
 MODES = ("inprocess-cpu", "inprocess-torch", "inprocess-cuda", "batched", "unbatched", "ipc", "ipc-unbatched")
 
@@ -89,7 +89,7 @@ def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log
         spec = runpy.run_path(str(ROOT / "benchmarks" / "torch_runtime.py"))["spec_of"](args.agent)
     if served:
         cfg = {"agent": args.agent, "device": args.device}
-        proc, url = _start_server(cfg, args.batch if mode == "batched" else 1, log)
+        proc, url = start_serve_agent(cfg, args.batch if mode == "batched" else 1, log)
         spec = f"remote:{url}"
     try:
         opts = EvalOptions(out=run_dir, agents=(spec,), families=tuple(args.families), k=args.k,
@@ -99,18 +99,18 @@ def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log
                            inference_processes=int(procs) if procs else 1,
                            agent_device=args.device if mode == "inprocess-cuda" else None,
                            routes=tuple(args.routes.split(",")) if args.routes else None)
-        s0 = _get_info(url)["stats"] if served else {"acts": 0, "batches": 0}
+        s0 = agent_info(url)["stats"] if served else {"acts": 0, "batches": 0}
         t1 = time.perf_counter()
         result = run_evaluation(opts)
         summary = result.summary
         t2 = time.perf_counter()
         # the server's counters (HTTP), or those of evaluate's inference processes (ipc)
-        s1 = _get_info(url)["stats"] if served else next(iter(result.inference.values()), None)
+        s1 = agent_info(url)["stats"] if served else next(iter(result.inference.values()), None)
         run_evaluation(opts)  # all stored: reuse checks, generation, reports
         t3 = time.perf_counter()
     finally:
         if proc is not None:
-            _stop_server(proc)
+            stop_serve_agent(proc)
     with ResultStore(run_dir / "results.sqlite") as store:
         recs = store.records()
     n = summary["episodes"]["done"] + summary["episodes"]["crashed"]

@@ -177,12 +177,16 @@ def _worker(idx: int, cfg: dict, ready, go, start, out) -> None:
         raise
 
 
-def _get_info(url: str) -> dict:
+def agent_info(url: str) -> dict:
+    """The ``/info`` answer of the serve-agent process at ``url`` (30 s time limit)."""
     with urllib.request.urlopen(url + "/info", timeout=30) as r:
         return json.loads(r.read())
 
 
-def _start_server(cfg: dict, max_batch: int, log) -> tuple[subprocess.Popen, str]:
+def start_serve_agent(cfg: dict, max_batch: int, log) -> tuple[subprocess.Popen, str]:
+    """Start ``icrsumo serve-agent`` for ``cfg["agent"]`` on ``cfg["device"]`` with batches of up
+    to ``max_batch``, its output to ``log``; return the process and its URL once it answers
+    (RuntimeError if it exits or does not answer within 120 s)."""
     from icrsumo.agents.remote import free_port
 
     port = free_port()
@@ -197,7 +201,7 @@ def _start_server(cfg: dict, max_batch: int, log) -> tuple[subprocess.Popen, str
         if proc.poll() is not None:
             raise RuntimeError(f"serve-agent exited with status {proc.returncode}")
         try:
-            _get_info(url)
+            agent_info(url)
             return proc, url
         except OSError:
             if time.monotonic() > t_end:
@@ -206,7 +210,7 @@ def _start_server(cfg: dict, max_batch: int, log) -> tuple[subprocess.Popen, str
             time.sleep(0.1)
 
 
-def _stop_server(proc: subprocess.Popen) -> None:
+def stop_serve_agent(proc: subprocess.Popen) -> None:
     """Stop a serve-agent process (SIGTERM, then SIGKILL after 30 s)."""
     proc.terminate()
     try:
@@ -224,7 +228,7 @@ def run_mode(mode: str, args: argparse.Namespace, files: list[str], log) -> dict
            "warmup": args.warmup, "sim_ms": args.sim_ms, "seconds": args.seconds, "url": None}
     proc = None
     if served:
-        proc, cfg["url"] = _start_server(cfg, max_batch, log)
+        proc, cfg["url"] = start_serve_agent(cfg, max_batch, log)
     ctx = mp.get_context("spawn")
     n = args.clients
     ready, go = ctx.Barrier(n + 1), ctx.Barrier(n + 1)
@@ -240,10 +244,10 @@ def run_mode(mode: str, args: argparse.Namespace, files: list[str], log) -> dict
             errors = [r["error"] for r in _drain(out) if "error" in r]
             raise RuntimeError(f"{mode}: workers failed: {errors[:2] or 'timeout'}") from None
         start.value = time.monotonic() + 0.05
-        s0 = _get_info(cfg["url"])["stats"] if served else None
+        s0 = agent_info(cfg["url"])["stats"] if served else None
         go.wait(timeout=60)
         time.sleep(max(0.0, start.value + args.seconds - time.monotonic()))
-        s1 = _get_info(cfg["url"])["stats"] if served else None
+        s1 = agent_info(cfg["url"])["stats"] if served else None
         results = [out.get(timeout=300) for _ in range(n)]
         for w in workers:
             w.join(timeout=60)
@@ -252,7 +256,7 @@ def run_mode(mode: str, args: argparse.Namespace, files: list[str], log) -> dict
             if w.is_alive():
                 w.kill()
         if proc is not None:
-            _stop_server(proc)
+            stop_serve_agent(proc)
     errors = [r["error"] for r in results if "error" in r]
     if errors:
         raise RuntimeError(f"{mode}: {errors[0]}")

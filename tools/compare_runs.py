@@ -99,7 +99,7 @@ def roadside_causes(old: Path, res: dict) -> list[dict]:
     from icrsumo.networks import load_net
     from icrsumo.render import BevRenderer, BevSpec
     from icrsumo.scenario import find_scenarios, read_scenario
-    from icrsumo.sim.drivable import DrivableArea, _polygonal, drivable_area, lane_polygons
+    from icrsumo.sim.drivable import DrivableArea, drivable_area, lane_polygons, polygonal
     from icrsumo.sim.sensors import footprint_corners
 
     scenarios = {sc.route_id: sc for sc in (read_scenario(d) for d in find_scenarios(old / "scenarios"))}
@@ -111,7 +111,7 @@ def roadside_causes(old: Path, res: dict) -> list[dict]:
         sc = scenarios[key[1]]
         if sc.route_id not in cache:
             net = load_net(sc.net)
-            lanes_only = DrivableArea(_polygonal(shapely.union_all(lane_polygons(net))))
+            lanes_only = DrivableArea(polygonal(shapely.union_all(lane_polygons(net))))
             cache[sc.route_id] = (BevRenderer(net, BevSpec()), drivable_area(net), lanes_only)
         raster, area, lanes_only = cache[sc.route_id]
         size = (sc.ego.length, sc.ego.width)

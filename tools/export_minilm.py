@@ -59,7 +59,7 @@ def read_safetensors(raw: bytes) -> dict[str, np.ndarray]:
 
 
 class Bert(nn.Module):
-    """BERT's encoder as MiniLM-L6-H384 uses it (its layers :class:`icrsumo.learn.nets.BertLayer`,
+    """BERT's encoder as MiniLM-L6-H384 uses it (its layers :class:`icrsumo.learn.nets.models.BertLayer`,
     named ``layers.N``), with mean pooling and L2 normalisation; also returns the token states
     that enter the last layer (what ``bev-minilm-tuned`` fine-tunes that layer on)."""
 
@@ -103,7 +103,7 @@ def exact_arrays(onnx_path: Path) -> dict[str, np.ndarray]:
     import onnx
     from onnx import numpy_helper
 
-    from icrsumo.learn.minilm import _PARTS, EXP_TABLE, GELU_TABLE, LAYERS, WIDTH, table
+    from icrsumo.learn.minilm import EXP_TABLE, GELU_TABLE, LAYER_PARTS, LAYERS, WIDTH, table
 
     init = {t.name: numpy_helper.to_array(t) for t in onnx.load(str(onnx_path)).graph.initializer}
     out: dict[str, np.ndarray] = {}
@@ -116,7 +116,7 @@ def exact_arrays(onnx_path: Path) -> dict[str, np.ndarray]:
     out["emb_ln.w"], out["emb_ln.b"] = init["emb_ln_w"], init["emb_ln_b"]
     for i in range(LAYERS):
         p = f"layers.{i}."
-        for part in _PARTS:
+        for part in LAYER_PARTS:
             out[p + f"{part}.q"] = init[p + f"{part}_w_quantized"]
             out[p + f"{part}.zero"] = init[p + f"{part}_w_zero_point"].astype(np.int16)
             out[p + f"{part}.scale"] = init[p + f"{part}_w_scale"].astype(np.float32)

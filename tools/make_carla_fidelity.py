@@ -33,7 +33,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from make_carla_routes import TOWNS, carla_towns, out_folder, suite_edges, write_suite  # noqa: E402
-from make_routes import Split, _onward, _random_walk, _turns, make_split, summarise  # noqa: E402
+from make_routes import Split, count_turns, make_split, onward_edges, random_walk, summarise  # noqa: E402
 
 from icrsumo.networks import RoadNet  # noqa: E402
 from icrsumo.types import EgoRoute, RouteSpec  # noqa: E402
@@ -76,10 +76,10 @@ on LangAuto's routes generalises.
 
 
 def revisit_walk(net: RoadNet, rng: np.random.Generator, split: Split):
-    """A random walk (as :func:`make_routes._random_walk`) with a loop spliced in: at one of its
+    """A random walk (as :func:`make_routes.random_walk`) with a loop spliced in: at one of its
     edges the route first drives a loop of up to :data:`MAX_LOOP` roads that ends back on that
     edge, then leaves it as the walk did. None when the walk has no such loop."""
-    drawn = _random_walk(net, rng, split)
+    drawn = random_walk(net, rng, split)
     if drawn is None:
         return None
     lane, pos, edges, end_pos = drawn
@@ -95,7 +95,7 @@ def _loop(net: RoadNet, rng: np.random.Generator, edge: str, avoid: str) -> list
     """Roads r1 .. rk (k >= 2) with ``edge`` -> r1 -> ... -> rk -> ``edge``, r1 != ``avoid``,
     no road twice: the shortest such loop by a breadth-first search whose ties are broken at
     random; None if there is none within :data:`MAX_LOOP` roads."""
-    firsts = [n for n in _onward(net, edge) if n != avoid]
+    firsts = [n for n in onward_edges(net, edge) if n != avoid]
     parent: dict[str, str | None] = {}
     frontier = []
     for j in rng.permutation(len(firsts)):
@@ -104,7 +104,7 @@ def _loop(net: RoadNet, rng: np.random.Generator, edge: str, avoid: str) -> list
     for _depth in range(MAX_LOOP):
         nxt_frontier = []
         for e in frontier:
-            onward = _onward(net, e)
+            onward = onward_edges(net, e)
             for j in rng.permutation(len(onward)):
                 n = onward[int(j)]
                 if n == edge and parent[e] is not None:
@@ -125,7 +125,7 @@ def revisits(net: RoadNet, route: EgoRoute) -> bool:
 
 
 def dense_junctions(net: RoadNet, route: EgoRoute) -> bool:
-    return _turns(route) >= DENSE_PER_KM * route.length / 1000.0
+    return count_turns(route) >= DENSE_PER_KM * route.length / 1000.0
 
 
 def multi_lane_change(net: RoadNet, route: EgoRoute) -> bool:

@@ -94,7 +94,7 @@ def _weather(rng: np.random.Generator) -> tuple[tuple[str, str], ...]:
     return tuple((k, v if isinstance(v, str) else f"{v:.1f}") for k, v in vals.items())
 
 
-def _onward(net: RoadNet, edge: str) -> list[str]:
+def onward_edges(net: RoadNet, edge: str) -> list[str]:
     """Successor edges reachable without a U-turn."""
     return [s for s in net.successors.get(edge, ())
             if any(c.direction != "t" for c in net.connections[(edge, s)])]
@@ -107,8 +107,9 @@ def _pick(net: RoadNet, rng: np.random.Generator, edges: list[str]) -> str:
     return edges[int(rng.choice(len(edges), p=w / w.sum()))]
 
 
-def _random_walk(net: RoadNet, rng: np.random.Generator, split: Split):
-    """A random route (start lane, start pos, edges, end pos) or None."""
+def random_walk(net: RoadNet, rng: np.random.Generator, split: Split):
+    """A random route for ``split`` (start lane, start pos, edges, end pos), or None where the
+    walk reaches a dead end: edges drawn by speed limit squared, no U-turn, no edge twice."""
     edges_all = sorted(e for e in net.passenger_lanes if net.edge_length[e] >= 25.0)
     start = _pick(net, rng, edges_all)
     length = float(rng.uniform(split.min_len, split.max_len))
@@ -120,7 +121,7 @@ def _random_walk(net: RoadNet, rng: np.random.Generator, split: Split):
     pos = first_len - rest
     edges, total, seen = [start], rest, {start}
     while True:
-        onward = [e for e in _onward(net, edges[-1]) if e not in seen]
+        onward = [e for e in onward_edges(net, edges[-1]) if e not in seen]
         if not onward:
             return None
         nxt = _pick(net, rng, onward)
@@ -186,7 +187,8 @@ def _pin_waypoints(net: RoadNet, lane: str, pos: float, edges: list[str], end_po
     return None
 
 
-def _turns(route: EgoRoute) -> int:
+def count_turns(route: EgoRoute) -> int:
+    """How many of the route's junction passes are a choice (a turn among several exits)."""
     return sum(1 for j in route.junctions if j.choice)
 
 
@@ -236,7 +238,7 @@ def make_split(
         for _attempt in range(attempts):
             if made == per_town.get(town, 0):
                 break
-            drawn = (walk or _random_walk)(net, rng, split)
+            drawn = (walk or random_walk)(net, rng, split)
             if drawn is None:
                 continue
             lane, pos, edges, end_pos = drawn
@@ -244,7 +246,7 @@ def make_split(
             if pinned is None:
                 continue
             pts, route = pinned
-            if not (split.min_len <= route.length <= split.max_len) or _turns(route) < split.min_turns:
+            if not (split.min_len <= route.length <= split.max_len) or count_turns(route) < split.min_turns:
                 continue
             if route.edges in forbidden or any(contains(route.edges, p) for p in avoid):
                 continue

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from icrsumo.convert import _sumocfg
+from icrsumo.convert import sumocfg_xml
 from icrsumo.networks import load_net
 from icrsumo.resources import bundled_towns
 from icrsumo.traffic import fleet_cap, make_traffic
@@ -45,7 +45,7 @@ def run_town(town: str, level: str, minutes: float, seed: int, cap: bool = True)
                                end + 60)
         files = [f for f in (traffic.vehicles, traffic.pedestrians) if f]
         max_vehicles = fleet_cap(town, net.lane_km, level) if cap else -1
-        cfg = _sumocfg(str(net.path), files, seed, end, max_vehicles)
+        cfg = sumocfg_xml(str(net.path), files, seed, end, max_vehicles)
         (out / "s.sumocfg").write_text(cfg, encoding="utf-8")
         ls.start(["sumo", "-c", str(out / "s.sumocfg"), "--no-step-log", "true"])
         try:

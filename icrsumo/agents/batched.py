@@ -23,7 +23,7 @@ so the workers' cores are left to SUMO and the episode loop.
 Results on CPU are those of the in-process agent, bit for bit (a learned agent runs a CPU
 batch sample by sample). On a GPU they differ from CPU inference by float rounding, and the
 learned agents pad every batch to a fixed size so that an episode's actions do not depend on
-which other episodes share its batch (:class:`icrsumo.learn.nets.Policy`).
+which other episodes share its batch (:class:`icrsumo.learn.nets.policy.Policy`).
 """
 
 from __future__ import annotations

@@ -1,5 +1,6 @@
-"""The files an evaluation leaves from its stored episodes: summary.json, the tables
-(:mod:`icrsumo.aggregate`, :mod:`icrsumo.report`) and the paired rollout figure."""
+"""The files an evaluation leaves from its stored episodes: summary.json, the tables, the
+figures, the attribution, the guards' files and report.html (:mod:`icrsumo.aggregate` computes
+the summary, :mod:`icrsumo.reporting` writes them)."""
 
 from __future__ import annotations
 
@@ -7,17 +8,18 @@ import sys
 from pathlib import Path
 
 from ..convert import safe_name
-from ..errors import InputError, visible
+from ..errors import InputError
 from ..instructions.families import ALL_FAMILIES
 from ..scenario import find_scenarios, read_scenario
 from ..store import ResultStore
+from ..summary import Summary
 from ..types import EpisodeRecord
 from .options import EvalOptions
 
 
 def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: list[EpisodeRecord],
                   scenarios: Path, instr_dir: Path, not_shown: int = 0, rescored_short: int = 0,
-                  not_shown_why: str = "") -> dict:
+                  not_shown_why: str = "") -> Summary:
     """Write summary.json, tables and figures of ``records`` into ``out`` (the table is printed
     unless ``opts.quiet``); returns the summary, whose ``digest`` covers every episode in
     ``store`` (:mod:`icrsumo.digests`) under ``opts.scoring``. ``rescored_short``: rescored episodes that
@@ -27,43 +29,36 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     (``episodes.stored_not_in_report``, with ``not_shown_why`` or a default reason as
     ``stored_not_in_report_why``) and named on stderr, never dropped silently."""
     from ..aggregate import summarize
-    from ..attribution import attach
-    from ..guards.measure import guard_doc, text_holdout
-    from ..report import write_attribution, write_guard, write_report
+    from ..attribution import attribution_doc
+    from ..reporting.attribution import write_attribution
+    from ..reporting.rollout import rollout_figure
+    from ..reporting.write import write_report
 
     families = tuple(f for f in ALL_FAMILIES if f in opts.families)  # canonical order
-    summary = summarize(records, suite=opts.suite, seed=opts.seed, k=opts.k, families=families)
-    summary["scoring"] = opts.scoring
-    summary["digest"] = store_digest(store, opts.scoring)
+    digest = store_digest(store, opts.scoring)
     ends: dict = {}
     answers: dict = {}
-    attribution = attach(summary, records, episode_decisions(store, records, instr_dir, ends, answers),
-                         answers)
+    decisions = episode_decisions(store, records, instr_dir, ends, answers)
     if rescored_short:
-        summary["episodes"]["rescored_short"] = rescored_short
         print(f"icrsumo: note: {rescored_short} episodes ended, under the rules they were run with, "
               f"before {opts.scoring}'s rules would have ended them: they are scored on what was simulated "
               f"(run them with --scoring {opts.scoring} for the full episodes)", file=sys.stderr)
+    why = ""
     if not_shown:
-        summary["episodes"]["stored_not_in_report"] = not_shown
         why = not_shown_why or (f"they are of other agents, routes, families or k (icrsumo report {out} "
                                 f"shows all)")
-        summary["episodes"]["stored_not_in_report_why"] = why
         print(f"icrsumo: note: {not_shown} stored episodes are not in this report: {why}", file=sys.stderr)
+    summary = summarize(records, suite=opts.suite, seed=opts.seed, k=opts.k, families=families,
+                        scoring=opts.scoring, digest=digest, decisions=decisions, answers=answers,
+                        rescored_short=rescored_short, not_in_report=not_shown, not_in_report_why=why)
+    attribution = attribution_doc(records, decisions)
     table = write_report(summary, records, out, ends)
     write_attribution(summary, attribution, out)
-    guards = guard_doc(summary, records)
-    if guards is not None:
-        table += "\n" + guard_note(guards)
-        if any(r["guard"] == "text" for r in guards["rows"].values()):
-            from ..guards.text import TextGuard
-            from ..instructions.banks import load_banks
-
-            guards["text_holdout"] = text_holdout(TextGuard(), load_banks())
-        write_guard(guards, out)
+    table += write_guards(summary, records, out)
     write_html(out, summary, records, attribution, store, scenarios, instr_dir)
     try:
-        rollout_figure(opts, out, store, records, scenarios, instr_dir)
+        rollout_figure(out, store, records, scenarios, instr_dir, route=opts.rollout_route, seed=opts.seed,
+                       families=opts.families)
     except InputError as err:  # the figure is optional; the numbers are all in the tables
         print(f"icrsumo: note: no rollout figure: {err.line()}", file=sys.stderr)
     if not opts.quiet:
@@ -71,36 +66,23 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     return summary
 
 
-def guard_note(doc: dict) -> str:
-    """What the printed summary says of a run's guards (:func:`icrsumo.guards.measure.guard_doc`):
-    per guard the misleading instructions it blocked (detection) and the goal-preserving ones it
-    blocked (false blocks), per guarded row the failures it prevented and caused against the
-    unguarded agent, and where to read more."""
-    from ..guards.measure import PRESERVING
-    from ..vocab import Family
+def write_guards(summary: Summary, records: list[EpisodeRecord], out: Path) -> str:
+    """guard.json, guard.md and its figure when a row of ``summary`` is guarded
+    (:func:`icrsumo.guards.measure.guard_doc`); returns what the printed table adds of them
+    ("" without a guarded row)."""
+    from ..guards.measure import guard_doc, text_holdout
+    from ..reporting.guard import guard_note, write_guard
 
-    def share(blocked: int, checked: int) -> str:
-        return f"{blocked}/{checked}" + (f" ({100 * blocked / checked:.1f} %)" if checked else "")
+    guards = guard_doc(summary, records)
+    if guards is None:
+        return ""
+    if any(r["guard"] == "text" for r in guards["rows"].values()):
+        from ..guards.text import TextGuard
+        from ..instructions.banks import load_banks
 
-    lines = []
-    for guard in doc["guards"]:
-        rows = {n: r for n, r in doc["rows"].items() if r["guard"] == guard}
-        counts = {}
-        for fams in (PRESERVING, (Family.MISLEADING,)):
-            f = [r["families"][str(x)] for r in rows.values() for x in fams if str(x) in r["families"]]
-            counts[fams] = (sum(x["blocked"] for x in f), sum(x["checked"] for x in f))
-        lines.append(f"Guard {visible(guard)}: blocked {share(*counts[(Family.MISLEADING,)])} misleading "
-                     f"instructions (detection) and {share(*counts[PRESERVING])} baseline, paraphrase and "
-                     "noise ones (false blocks)")
-        for name, r in rows.items():
-            if not r["unguarded_in_run"]:
-                continue
-            prevented = sum(f["flips"]["prevented"] for f in r["families"].values())
-            caused = sum(f["flips"]["caused"] for f in r["families"].values())
-            lines.append(f"  {visible(name)}: {prevented} failures of the unguarded agent prevented, "
-                         f"{caused} caused")
-    lines.append("guard.md holds every guarded row's table; docs/guards.md says what the numbers mean")
-    return "\n".join(lines) + "\n"
+        guards["text_holdout"] = text_holdout(TextGuard(), load_banks())
+    write_guard(guards, out)
+    return "\n" + guard_note(guards)
 
 
 def store_digest(store: ResultStore, scoring: str) -> str | None:
@@ -116,14 +98,14 @@ def store_digest(store: ResultStore, scoring: str) -> str | None:
         return None
 
 
-def write_html(out: Path, summary: dict, records: list[EpisodeRecord], attribution: dict,
+def write_html(out: Path, summary: Summary, records: list[EpisodeRecord], attribution: dict,
                store: ResultStore, scenarios: Path, instr_dir: Path) -> None:
-    """OUT/report.html (:mod:`icrsumo.html_report`) from the stored logs, the routes'
+    """OUT/report.html (:mod:`icrsumo.reporting.html`) from the stored logs, the routes'
     instruction files and networks; a route whose files cannot be read is drawn without them."""
-    from ..html_report import write_html_report
     from ..instructions.store import read_instruction_sets
     from ..networks import load_net
     from ..render import BevRenderer, map_view_png
+    from ..reporting.html import write_html_report
 
     scen = {}
     if Path(scenarios).is_dir() and (Path(scenarios) / "index.json").is_file():
@@ -225,55 +207,3 @@ def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_di
         print(f"icrsumo: note: {len(damaged)} stored episode logs cannot be read, so their decisions are "
               f"not in the attribution (first: {damaged[0]})", file=sys.stderr)
     return out
-
-
-def rollout_figure(opts: EvalOptions, out: Path, store: ResultStore, records: list[EpisodeRecord],
-                   scenarios: Path, instr_dir: Path) -> None:
-    """Paired rollout figure: the baseline against one variant of each family for one route and
-    agent (``opts.rollout_route``, default the first with a finished baseline): the first
-    variant that failed (else k = 0), captioned with the instruction active where it went wrong
-    (where it diverged from the baseline, else where it ended)."""
-    import numpy as np
-
-    from ..html_report import divergence_t
-    from ..instructions.store import read_instruction_sets
-    from ..networks import load_net
-    from ..report import paired_rollout
-
-    done = [r for r in records if r.status == "done" and r.family == "baseline"]
-    if not done:
-        return
-    route = opts.rollout_route or done[0].route_id
-    agent = done[0].agent
-    base_log = store.episode_log(agent, route, "baseline", 0, opts.seed)
-    if base_log is None:
-        return
-    sets = {(s.family, s.k): s for s in read_instruction_sets(instr_dir / f"{safe_name(route)}.json")}
-    variants = []
-    for fam in opts.families:
-        mine = sorted((r for r in records if (r.agent, r.route_id, r.family) == (agent, route, fam)
-                       and r.status == "done"), key=lambda r: r.k)
-        failed = [r for r in mine if r.termination_class != "done"]
-        chosen = failed[0] if failed else mine[0] if mine else None  # a variant that failed, if any
-        if chosen is None or (fam, chosen.k) not in sets:
-            continue
-        log = store.episode_log(agent, route, fam, chosen.k, opts.seed)
-        if log is None or not log.t:
-            continue
-        t_wrong = divergence_t(base_log, log) if failed else None
-        at = t_wrong if t_wrong is not None else (log.t[-1] if failed else log.t[0])
-        i = min(int(np.searchsorted(log.t, at)), len(log.t) - 1)
-        iid = log.instruction[i] if failed else 0
-        texts = {ins.id: ins.rendered() for ins in sets[(fam, chosen.k)].instructions}
-        text = texts.get(iid, texts.get(0, ""))
-        if failed:
-            text = f"(active at t = {at:.1f} s, where it went wrong) {text}"
-        variants.append((f"{fam} k={chosen.k}", log, text))
-    sc_dir = next((d for d in find_scenarios(scenarios) if read_scenario(d).route_id == route), None)
-    if sc_dir is None:
-        return
-    net = load_net(read_scenario(sc_dir).net)
-    fig = out / "figures" / f"rollout_{safe_name(route)}.png"
-    fig.parent.mkdir(parents=True, exist_ok=True)
-    paired_rollout(net, base_log, variants, sets[("baseline", 0)].instructions[0].rendered(),
-                   fig, title=f"{agent} on {route}")

@@ -23,6 +23,7 @@ from ..guards.base import guarded_fingerprint, guarded_name
 from ..instructions.families import ALL_FAMILIES, FAMILIES
 from ..scoring import SCORINGS, score_episode, scoring_names
 from ..store import ResultStore
+from ..summary import Summary
 from ..types import EpisodeRecord
 from ..vocab import EpisodeStatus, ErrorKind, OutcomeStatus
 from .backends import run_jobs
@@ -44,14 +45,16 @@ MAX_NAME = 200
 
 @dataclass(frozen=True)
 class EvalResult:
-    """What an evaluation gave. ``summary``: the contents of OUT/summary.json; ``out``: the
+    """What an evaluation gave. ``stats``: OUT/summary.json as a typed
+    :class:`icrsumo.summary.Summary` (``stats.agents[NAME].baseline.ds``); ``summary``: the same
+    as summary.json's plain mapping (``summary["agents"][NAME]["baseline"]["DS"]``); ``out``: the
     folder; ``episodes``: episodes of the plan, ``ran``: those run now (the others were stored
     already), ``done`` / ``crashed``: the plan's stored episodes by status; ``inference``: agent
     name -> statistics of its batched inference processes (``batch_inference`` only: resets,
     acts, batches, largest_batch, processes, and the seconds wait_s, io_s, run_s); ``digest``:
     the summary's digest."""
 
-    summary: dict = field(repr=False)
+    stats: Summary = field(repr=False)
     out: Path
     episodes: int
     ran: int
@@ -60,10 +63,15 @@ class EvalResult:
     inference: Mapping[str, dict] = field(default_factory=dict)
 
     @property
+    def summary(self) -> dict:
+        """summary.json's mapping (a new dict each time: :meth:`icrsumo.summary.Summary.to_dict`)."""
+        return self.stats.to_dict()
+
+    @property
     def digest(self) -> str | None:
-        """The run's digest (``summary["digest"]``: every stored episode and the scoring,
+        """The run's digest (``stats.digest``: every stored episode and the scoring,
         :mod:`icrsumo.digests`), None when a damaged stored log leaves the store without one."""
-        return self.summary.get("digest")
+        return self.stats.digest
 
 
 def resolve_agents(specs: tuple) -> dict[str, Callable]:
@@ -283,9 +291,8 @@ def _run_locked(opts: EvalOptions, factories: dict[str, Callable], guards: dict[
         records = [r for r in stored if (r.agent, r.route_id, r.family, r.k, r.seed) in keys]
         summary = write_outputs(opts, out, store, records, prep.scenarios, prep.instructions,
                                 not_shown=len(stored) - len(records))
-    ep = summary["episodes"]
-    return EvalResult(summary=summary, out=out, episodes=len(jobs), ran=len(todo), done=ep["done"],
-                      crashed=ep["crashed"], inference=stats)
+    return EvalResult(stats=summary, out=out, episodes=len(jobs), ran=len(todo), done=summary.episodes.done,
+                      crashed=summary.episodes.crashed, inference=stats)
 
 
 def check_stored_routes(opts: EvalOptions, store: ResultStore, agents: set[str], prepared: set[str],
@@ -340,7 +347,7 @@ def run_queue(queue: list[Job], opts: EvalOptions, store: ResultStore, progress:
         queue = retry
 
 
-def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> dict:
+def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> Summary:
     """Rebuild summary, tables and figures of an evaluation folder from its store (no SUMO);
     returns the summary. With ``scoring`` (a name of :data:`icrsumo.scoring.SCORINGS`) every
     finished episode is rescored from its stored log by those rules (the store is left as it
@@ -357,7 +364,7 @@ def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> d
         return _report_locked(out, quiet, scoring)
 
 
-def _report_locked(out: Path, quiet: bool, scoring: str | None) -> dict:
+def _report_locked(out: Path, quiet: bool, scoring: str | None) -> Summary:
     cfg_path = out / "config.json"
     cfg = read_config(out)
     stored_scoring = cfg.get("scoring")

@@ -19,7 +19,8 @@ per family (baseline included):
 
 ``guards`` pools each guard's block rates over its rows: ``detection`` (misleading) and
 ``false_blocks`` (baseline + paraphrase + noise), ``false_blocks_ambiguity`` apart. A guard's
-targets (:data:`TARGETS`) are checked where it has them.
+targets (:data:`TARGETS`) are checked where it has them. guard.json, guard.md and its figure
+are written by :mod:`icrsumo.reporting.guard`.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from ..aggregate import holm, paired_test
+from ..summary import Block, FamilyStats, Summary
 from ..types import EpisodeRecord
 from ..vocab import EpisodeStatus, Family
 from .base import split_row
@@ -45,9 +47,20 @@ def _rate(blocked: int, checked: int) -> float | None:
     return round(blocked / checked, 4) if checked else None
 
 
-def _scores(block: dict | None) -> dict[str, Any]:
-    block = block or {}
-    return {k: block.get(k) for k in ("DS", "RC", "IS", "dDS")}
+def _scores(block: Block | None) -> dict[str, Any]:
+    """DS, RC, IS and ΔDS of a summary's row (None each without the row; ΔDS None on a baseline)."""
+    if block is None:
+        return {"DS": None, "RC": None, "IS": None, "dDS": None}
+    d_ds = block.d_ds if isinstance(block, FamilyStats) else None
+    return {"DS": block.ds, "RC": block.rc, "IS": block.is_, "dDS": d_ds}
+
+
+def _block(summary: Summary, name: str, family: str) -> Block | None:
+    """The row of agent ``name`` and ``family`` in ``summary`` (None: not there)."""
+    a = summary.agents.get(name)
+    if a is None:
+        return None
+    return a.baseline if family == Family.BASELINE else a.families.get(family)
 
 
 def _pairs(records: Sequence[EpisodeRecord], agent: str, family: str) -> dict[tuple, EpisodeRecord]:
@@ -55,8 +68,8 @@ def _pairs(records: Sequence[EpisodeRecord], agent: str, family: str) -> dict[tu
             if r.agent == agent and r.family == family and r.status == EpisodeStatus.DONE}
 
 
-def _row(summary: dict, records: Sequence[EpisodeRecord], row: str, base: str) -> dict[str, Any]:
-    fams = [str(Family.BASELINE), *summary.get("families", [])]
+def _row(summary: Summary, records: Sequence[EpisodeRecord], row: str, base: str) -> dict[str, Any]:
+    fams = [str(Family.BASELINE), *summary.families]
     out: dict[str, Any] = {}
     raw_p: list[float | None] = []
     for fam in fams:
@@ -72,11 +85,7 @@ def _row(summary: dict, records: Sequence[EpisodeRecord], row: str, base: str) -
         means = np.array([np.mean(v) for v in per_route.values()], dtype=float)
         p = round(paired_test(means), 6) if len(means) else None
         raw_p.append(p)
-
-        def block(name: str, f: str = fam) -> dict | None:
-            a = summary["agents"].get(name, {})
-            return a.get("baseline") if f == Family.BASELINE else a.get("families", {}).get(f)
-        gs, us = _scores(block(row)), _scores(block(base))
+        gs, us = _scores(_block(summary, row, fam)), _scores(_block(summary, base, fam))
         shrink = None
         if fam != Family.BASELINE and us["dDS"] is not None and gs["dDS"] is not None and us["dDS"] < 0:
             shrink = round(1.0 - gs["dDS"] / us["dDS"], 4)
@@ -93,18 +102,18 @@ def _row(summary: dict, records: Sequence[EpisodeRecord], row: str, base: str) -
     return out
 
 
-def guard_doc(summary: dict, records: Sequence[EpisodeRecord]) -> dict[str, Any] | None:
+def guard_doc(summary: Summary, records: Sequence[EpisodeRecord]) -> dict[str, Any] | None:
     """The guard document (module doc) of an evaluation's ``summary`` and ``records``; None
     when no row is guarded."""
     rows: dict[str, dict] = {}
     pooled: dict[str, dict[str, list[int]]] = {}
-    for name in summary.get("agents", {}):
+    for name in summary.agents:
         parts = split_row(name)
         if parts is None:
             continue
         agent, guard = parts
         fams = _row(summary, records, name, agent)
-        rows[name] = {"agent": agent, "guard": guard, "unguarded_in_run": agent in summary["agents"],
+        rows[name] = {"agent": agent, "guard": guard, "unguarded_in_run": agent in summary.agents,
                       "families": fams}
         acc = pooled.setdefault(guard, {})
         for fam, f in fams.items():
@@ -141,47 +150,6 @@ def guard_doc(summary: dict, records: Sequence[EpisodeRecord]) -> dict[str, Any]
                     for r in rows.values() if r["guard"] == guard for f in PRESERVING)}}
         guards[guard] = entry
     return {"format": GUARD_FORMAT, "guards": guards, "rows": rows}
-
-
-def _pct(x: float | None) -> str:
-    return "—" if x is None else f"{100 * x:.1f} %"
-
-
-def _num(x: float | None, sign: bool = False) -> str:
-    return "—" if x is None else (f"{x:+.1f}" if sign else f"{x:.1f}")
-
-
-def guard_markdown(doc: dict, escape=lambda s: s) -> str:
-    """guard.md: one line per guard (detection, false blocks), one table per guarded row.
-    ``escape`` makes a name safe in a Markdown table cell."""
-    lines = ["# Instruction guards", "",
-             "Block rate on misleading = detection; on baseline, paraphrase and noise = false blocks "
-             "(ambiguity apart). ΔDS against each row's own baseline; shrink = 1 - ΔDS guarded / ΔDS "
-             "unguarded; flips against the unguarded agent; loss: DS guarded - unguarded, Wilcoxon "
-             "signed-rank over routes, Holm over the row's families.", "",
-             "| Guard | detection | false blocks | false blocks (ambiguity) | targets |",
-             "|---|---:|---:|---:|---|"]
-    for name, g in doc["guards"].items():
-        t = g.get("targets")
-        met = "—" if t is None else ", ".join(f"{k} {'met' if v['met'] else 'missed'}" for k, v in t.items())
-        lines.append(f"| {escape(name)} | {_pct(g['detection'])} | {_pct(g['false_blocks'])} | "
-                     f"{_pct(g['false_blocks_ambiguity'])} | {met} |")
-    for row, r in doc["rows"].items():
-        lines += ["", f"## {escape(row)}", "",
-                  "| Family | blocked | DS guarded / unguarded | ΔDS guarded / unguarded | shrink | "
-                  "flips prevented / caused | loss vs unguarded (p) |",
-                  "|---|---:|---:|---:|---:|---:|---:|"]
-        for fam, f in r["families"].items():
-            loss = f["loss"]
-            p = "—" if loss["p_value"] is None else f"{loss['p_value']:.3g}"
-            p += ", significant" if loss["significant_loss"] else ""
-            lines.append(
-                f"| {fam} | {f['blocked']}/{f['checked']} ({_pct(f['block_rate'])}) | "
-                f"{_num(f['guarded']['DS'])} / {_num(f['unguarded']['DS'])} | "
-                f"{_num(f['guarded']['dDS'], True)} / {_num(f['unguarded']['dDS'], True)} | "
-                f"{_pct(f['dDS_shrink'])} | {f['flips']['prevented']} / {f['flips']['caused']} | "
-                f"{_num(loss['mean_dDS_vs_unguarded'], True)} ({p}) |")
-    return "\n".join(lines) + "\n"
 
 
 def template_number(template_id: str) -> int | None:

@@ -4,7 +4,7 @@ A :class:`LearnedAgent` runs a policy (one per checkpoint, device and process, l
 use) on each observation and hands its waypoints and target speed to the built-in controller; a
 stop decision sets the target speed to 0. An exact checkpoint (``.npz``) runs in
 :class:`icrsumo.learn.exact.model.ExactPolicy` (numpy, the same bits on every CPU, no torch); a
-float one (``.pt``, read with ``weights_only=True``) in :class:`icrsumo.learn.nets.Policy`
+float one (``.pt``, read with ``weights_only=True``) in :class:`icrsumo.learn.nets.policy.Policy`
 (ONNX Runtime or torch: the ``train`` extra), where the stop decision is a stop probability
 above 0.5. Its only memory is the time it has been stopped
 (:class:`icrsumo.learn.labels.StopClock`). ``act_batch`` runs several episodes' observations in
@@ -71,7 +71,7 @@ def read_checkpoint(path: Path) -> None:
 def checkpoint_path(checkpoint: str | Path) -> Path:
     """The file of a checkpoint given as a path or as a shipped checkpoint's file name
     (``bev-token.pt``); an InputError when there is no such file. Its content is checked when
-    the policy loads (:func:`icrsumo.learn.nets.read_checkpoint`)."""
+    the policy loads (:func:`icrsumo.learn.nets.checkpoint.read_checkpoint`)."""
     if not str(checkpoint):
         raise InputError("checkpoint", "", "no agent checkpoint given", _FIX)
     path = Path(checkpoint)
@@ -87,7 +87,7 @@ def checkpoint_path(checkpoint: str | Path) -> Path:
 class LearnedAgent:
     """A non-privileged agent around a checkpoint (``checkpoint``: a path) whose network runs
     on ``device`` (cpu, cuda, cuda:N, auto); on the CPU in ``runtime`` ``onnx`` (ONNX Runtime,
-    the default) or ``torch`` (:class:`icrsumo.learn.nets.Policy`)."""
+    the default) or ``torch`` (:class:`icrsumo.learn.nets.policy.Policy`)."""
 
     name = "learned"
     privileged = False

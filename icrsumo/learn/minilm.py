@@ -52,7 +52,8 @@ FIXED = 12
 SOFT_BITS = 20
 #: tables: (lo, hi, steps per unit)
 EXP_TABLE, GELU_TABLE = (-16.0, 0.0, 64), (-8.0, 8.0, 64)
-_PARTS = ("q", "k", "v", "o", "ffn_in", "ffn_out")
+#: the weight matrices of one encoder layer, in the order the checkpoint stores them
+LAYER_PARTS = ("q", "k", "v", "o", "ffn_in", "ffn_out")
 _FIX = "reinstall icrsumo (the file ships with it), or rebuild it with python tools/export_minilm.py"
 
 
@@ -147,7 +148,7 @@ class SentenceEncoder:
         # each product's weights as float64 integers (q - zero point), scales and bias, converted once
         self.w, self.scale, self.bias = {}, {}, {}
         for i in range(LAYERS):
-            for part in _PARTS:
+            for part in LAYER_PARTS:
                 p = f"layers.{i}.{part}"
                 w = self.a[f"{p}.q"].astype(np.int16) - self.a[f"{p}.zero"]
                 self.w[p] = w.astype(np.float64)
@@ -195,10 +196,10 @@ class SentenceEncoder:
         return x.astype(np.float32)
 
     def last_layer(self) -> dict[str, np.ndarray]:
-        """The encoder's last layer as :class:`icrsumo.learn.nets.BertLayer`'s float32 state
+        """The encoder's last layer as :class:`icrsumo.learn.nets.models.BertLayer`'s float32 state
         dict, its 8-bit weights dequantised per output channel: where fine-tuning starts."""
         p, out = f"layers.{LAYERS - 1}.", {}
-        for part in _PARTS:
+        for part in LAYER_PARTS:
             out[f"{part}_w"] = (self.w[p + part] * self.a[f"{p}{part}.scale"]).astype(np.float32)
             out[f"{part}_b"] = self.a[f"{p}{part}.b"].astype(np.float32)
         for ln in ("ln1", "ln2"):
@@ -233,7 +234,7 @@ def _read(path: Path) -> dict[str, np.ndarray]:
         raise InputError(path, "__format__", "not an icrsumo sentence encoder file", _FIX)
     want = {"word.q", "word.zero", "word.scale", "position.q", "position.zero", "position.scale",
             "token_type", "emb_ln.w", "emb_ln.b", "exp_table", "gelu_table",
-            *(f"layers.{i}.{part}.{k}" for i in range(LAYERS) for part in _PARTS
+            *(f"layers.{i}.{part}.{k}" for i in range(LAYERS) for part in LAYER_PARTS
               for k in ("q", "zero", "scale", "b")),
             *(f"layers.{i}.{ln}.{k}" for i in range(LAYERS) for ln in ("ln1", "ln2") for k in ("w", "b"))}
     missing = sorted(want - set(a))

@@ -3,8 +3,8 @@ encoder) on the CPU; the only module of the package that imports onnxruntime.
 
 At batch size 1 a small network's cost in torch is mostly framework overhead per operator.
 :class:`OrtFuse` runs the same graph (the BEV encoder, the FiLM fusion and the heads: every
-part of :meth:`icrsumo.learn.nets.BevLanguageNet.fuse`, exported from the torch model in
-memory by :func:`icrsumo.learn.nets.onnx_bytes`) in one ONNX Runtime session with one thread
+part of :meth:`icrsumo.learn.nets.models.BevLanguageNet.fuse`, exported from the torch model in
+memory by :func:`icrsumo.learn.nets.policy.onnx_bytes`) in one ONNX Runtime session with one thread
 and sequential execution, so that a call is deterministic and its result depends only on its
 inputs. Its outputs equal torch's within float rounding (tested: waypoints within 1e-4 m);
 the language vector is still computed by torch, once per distinct text.
@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import onnxruntime as ort
 
-#: names of the graph's inputs and outputs (fixed by :func:`icrsumo.learn.nets.onnx_bytes`)
+#: names of the graph's inputs and outputs (fixed by :func:`icrsumo.learn.nets.policy.onnx_bytes`)
 INPUTS = ("bev", "lang", "speed", "stopped")
 OUTPUTS = ("waypoints", "speed_out", "stop_prob")
 

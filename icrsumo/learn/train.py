@@ -32,8 +32,10 @@ import sys
 import time
 import tomllib
 import zlib
+from collections.abc import Callable
 from dataclasses import Field, asdict, dataclass, fields
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -42,7 +44,13 @@ from ..errors import InputError, expect
 from ..fsio import dumps_json, read_json_doc, read_text, write_atomic
 from ..procs import spawn_context
 from .augment import augment
+from .config import ModelConfig
 from .text import ENCODERS, VECTOR_ENCODERS, build_vocab
+
+if TYPE_CHECKING:
+    import torch
+
+    from .nets import Trainer
 
 TRAIN_FORMAT = "icrsumo-train/1"
 _DEFAULT_TEXT_LEN = {"token": 32, "ngram": 192, "minilm": 384, "minilm-tuned": 64 * 384}
@@ -368,47 +376,48 @@ def step_bar(steps: int, done: int, quiet: bool):
                 mininterval=0.1 if tty else 30.0)
 
 
-def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = False,
-          encode_workers: int = 1) -> dict:
-    """Train (or resume) into ``out``; returns the final validation metrics. ``encode_workers``:
-    processes that compute the pretrained encoder's embeddings of the training texts (the same
-    embeddings whatever their number)."""
-    import torch
-
+def _resume_state(cfg: TrainConfig, out: Path) -> dict | None:
+    """The training state ``out/last.pt`` to resume from, checked against ``cfg`` (None: a fresh
+    run); ``out`` is a folder or does not exist yet. Reads only: a refused run writes nothing."""
     from . import nets
 
-    # everything is checked before OUT is made or touched: a refused run writes nothing
-    cfg.check()
-    out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError(out, "", "exists and is not a folder", "give a new folder, or an earlier run's")
-    cfg_doc = asdict(cfg)
     last = out / "last.pt"
-    state = None
-    if last.exists():
-        fix = f"delete it to start over, or use another {Named('out')} folder"
-        state = nets.load(last, "training checkpoint", fix)
-        if state.get("format") != nets.STATE_FORMAT:
-            raise InputError(last, "format", f"not an icrsumo training checkpoint (format "
-                             f"{str(state.get('format'))[:40]!r})", fix)
-        if state.get("train_config") != cfg_doc:
-            raise InputError(last, "train_config", "was written with a different config",
-                             f"use another {Named('out')} folder, or the same config")
-    rng = np.random.default_rng([cfg.seed, 1])
-    t0 = time.perf_counter()
-    say = functools.partial(_say, quiet=quiet)
-    ds = load_dataset(data)  # (progress only once the data is known good: a refusal is one line)
+    if not last.exists():
+        return None
+    fix = f"delete it to start over, or use another {Named('out')} folder"
+    state = nets.load(last, "training checkpoint", fix)
+    if state.get("format") != nets.STATE_FORMAT:
+        raise InputError(last, "format", f"not an icrsumo training checkpoint (format "
+                         f"{str(state.get('format'))[:40]!r})", fix)
+    if state.get("train_config") != asdict(cfg):
+        raise InputError(last, "train_config", "was written with a different config",
+                         f"use another {Named('out')} folder, or the same config")
+    return state
+
+
+def _training_split(ds: Dataset, cfg: TrainConfig, data: Path | list[Path]) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`split`'s training and validation frames; an InputError naming the first data
+    folder when no route is left for training."""
     tr_idx, va_idx = split(ds, cfg.val_fraction, cfg.seed)
     if not len(tr_idx):
         folders = data if isinstance(data, list) else [data]
         raise InputError(folders[0], "", f"all {len(ds.routes)} routes of the data fall in the validation "
                          f"split (val_fraction {cfg.val_fraction})",
                          "collect more routes, or lower val_fraction in the config")
+    return tr_idx, va_idx
+
+
+def _instruction_ids(ds: Dataset, cfg: TrainConfig, encode_workers: int,
+                     say: Callable[[str], None]) -> tuple[ModelConfig, np.ndarray, np.ndarray]:
+    """The model config and the encoded training texts: ids ``(instructions, variants,
+    text_len)`` (each distinct text encoded once) and how many texts each instruction has."""
     pool = text_pool(ds, cfg, np.random.default_rng([cfg.seed, 2]))
     text_len = cfg.text_len or _DEFAULT_TEXT_LEN[cfg.encoder]
     vocab = tuple(build_vocab(t for texts in pool for t in texts)) if cfg.encoder == "token" else ()
-    mcfg = nets.ModelConfig(encoder=cfg.encoder, text_len=text_len, buckets=cfg.buckets, vocab=vocab,
-                            width=cfg.width, hidden=cfg.hidden)
+    mcfg = ModelConfig(encoder=cfg.encoder, text_len=text_len, buckets=cfg.buckets, vocab=vocab,
+                       width=cfg.width, hidden=cfg.hidden)
     enc = mcfg.text_encoder()
     n_var = max(len(p) for p in pool)
     ids = np.zeros((len(pool), n_var, text_len), dtype=enc.dtype)
@@ -420,9 +429,13 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
     codes = encode_texts(enc, distinct, encode_workers)
     for i, texts in enumerate(pool):
         ids[i, : len(texts)] = codes[[row[t] for t in texts]]
-    device = nets.pick_device(cfg.device, "device")
-    trainer = nets.Trainer(mcfg, cfg.seed, cfg.lr, cfg.weight_decay, cfg.steps, device, cfg.lr_tuned)
-    log_path = out / "train_log.jsonl"
+    return mcfg, ids, n_texts
+
+
+def _resume(trainer: Trainer, state: dict | None, rng: np.random.Generator, out: Path) -> None:
+    """``trainer`` and ``rng`` resumed from ``state`` (None: a fresh run), then ``out`` made and
+    its ``train_log.jsonl`` cut back to the resumed step (removed for a fresh run)."""
+    last, log_path = out / "last.pt", out / "train_log.jsonl"
     kept: list[str] = []
     if state is not None:
         trainer.load_state(state, last)
@@ -443,7 +456,16 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
             write_atomic(log_path, "".join(ln + "\n" for ln in kept))
     elif log_path.is_file():
         log_path.unlink()
-    # the whole dataset on the device once
+
+
+def _batcher(ds: Dataset, ids: np.ndarray, n_texts: np.ndarray, device: torch.device) -> Callable[..., dict]:
+    """``batch(idx, variant)``: the frames ``idx`` as a training batch, each with the text
+    ``variant`` (None: the first) of its instruction; the whole dataset is moved to ``device``
+    once, here."""
+    import torch
+
+    from . import nets
+
     dev = {k: torch.from_numpy(np.ascontiguousarray(getattr(ds, k))).to(device)
            for k in ("bev", "speed", "stopped_for", "waypoints", "target_speed", "doc")}
     dev["ids"] = torch.from_numpy(ids).to(device)
@@ -460,12 +482,37 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
                 "target_speed": dev["target_speed"][i], "ids": dev["ids"][doc, v],
                 "intent": dev["intent"][doc]}
 
-    val_rng = np.random.default_rng([cfg.seed, 3])
+    return batch
+
+
+def _validation_frames(va_idx: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """At most 4096 of the validation frames (sorted) and each one's text variant."""
+    val_rng = np.random.default_rng([seed, 3])
     val_idx = (np.sort(val_rng.choice(va_idx, size=min(len(va_idx), 4096), replace=False))
                if len(va_idx) else va_idx)
-    val_var = val_rng.integers(0, 1 << 30, size=len(val_idx))
-    say(f"{len(tr_idx)} training / {len(va_idx)} validation frames, {len(ds.docs)} instructions, "
-        f"{nets.parameter_count(trainer.model)} parameters on {device}, from step {trainer.step}")
+    return val_idx, val_rng.integers(0, 1 << 30, size=len(val_idx))
+
+
+def _validate(trainer: Trainer, batch: Callable[..., dict], val_idx: np.ndarray, val_var: np.ndarray) -> dict:
+    """The validation metrics over ``val_idx`` (in chunks of 1024 frames, weighted by size)."""
+    res: dict[str, float] = {}
+    for a in range(0, len(val_idx), 1024):
+        r = trainer.evaluate(batch(val_idx[a:a + 1024], val_var[a:a + 1024]))
+        w = len(val_idx[a:a + 1024]) / len(val_idx)
+        for k, v in r.items():
+            res[k] = res.get(k, 0.0) + v * w
+    return {k: round(v, 5) for k, v in res.items()}
+
+
+def _run_steps(cfg: TrainConfig, trainer: Trainer, batch: Callable[..., dict], tr_idx: np.ndarray,
+               val: tuple[np.ndarray, np.ndarray], rng: np.random.Generator, out: Path, quiet: bool,
+               t0: float) -> dict:
+    """Train from ``trainer.step`` to ``cfg.steps``: a metrics line to ``out/train_log.jsonl``
+    every ``eval_every`` steps and at the end, the state to ``out/last.pt`` every
+    ``checkpoint_every`` steps and at the end; returns the last metrics line."""
+    from . import nets
+
+    cfg_doc = asdict(cfg)
     sums: dict[str, float] = {}
     n_sum = 0
     metrics: dict = {}
@@ -484,26 +531,50 @@ def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = Fa
             metrics = {"step": step, "lr": trainer.sched.get_last_lr()[0],
                        "train": {k: round(v / n_sum, 5) for k, v in sums.items()},
                        "elapsed_s": round(time.perf_counter() - t0, 1)}
-            if len(val_idx):
-                res: dict[str, float] = {}
-                for a in range(0, len(val_idx), 1024):
-                    r = trainer.evaluate(batch(val_idx[a:a + 1024], val_var[a:a + 1024]))
-                    w = len(val_idx[a:a + 1024]) / len(val_idx)
-                    for k, v in r.items():
-                        res[k] = res.get(k, 0.0) + v * w
-                metrics["val"] = {k: round(v, 5) for k, v in res.items()}
-            with open(log_path, "a", encoding="utf-8") as f:
+            if len(val[0]):
+                metrics["val"] = _validate(trainer, batch, *val)
+            with open(out / "train_log.jsonl", "a", encoding="utf-8") as f:
                 f.write(json.dumps(metrics) + "\n")
             if bar is not None:
                 bar.write(f"icrsumo train: {json.dumps(metrics)}", file=sys.stderr)
             sums, n_sum = {}, 0
         if step % cfg.checkpoint_every == 0 or step == cfg.steps:
-            nets.save(trainer.state({"train_config": cfg_doc, "rng": rng.bit_generator.state}), last)
+            state = trainer.state({"train_config": cfg_doc, "rng": rng.bit_generator.state})
+            nets.save(state, out / "last.pt")
     if bar is not None:
         bar.close()
+    return metrics
+
+
+def train(cfg: TrainConfig, data: Path | list[Path], out: Path, quiet: bool = False,
+          encode_workers: int = 1) -> dict:
+    """Train (or resume) into ``out``; returns the final validation metrics. ``encode_workers``:
+    processes that compute the pretrained encoder's embeddings of the training texts (the same
+    embeddings whatever their number)."""
+    from . import nets
+
+    # everything is checked before OUT is made or touched: a refused run writes nothing
+    cfg.check()
+    out = Path(out)
+    state = _resume_state(cfg, out)
+    rng = np.random.default_rng([cfg.seed, 1])
+    t0 = time.perf_counter()
+    say = functools.partial(_say, quiet=quiet)
+    ds = load_dataset(data)  # (progress only once the data is known good: a refusal is one line)
+    tr_idx, va_idx = _training_split(ds, cfg, data)
+    mcfg, ids, n_texts = _instruction_ids(ds, cfg, encode_workers, say)
+    device = nets.pick_device(cfg.device, "device")
+    trainer = nets.Trainer(mcfg, cfg.seed, cfg.lr, cfg.weight_decay, cfg.steps, device, cfg.lr_tuned)
+    _resume(trainer, state, rng, out)
+    batch = _batcher(ds, ids, n_texts, device)
+    val = _validation_frames(va_idx, cfg.seed)
+    say(f"{len(tr_idx)} training / {len(va_idx)} validation frames, {len(ds.docs)} instructions, "
+        f"{nets.parameter_count(trainer.model)} parameters on {device}, from step {trainer.step}")
+    metrics = _run_steps(cfg, trainer, batch, tr_idx, val, rng, out, quiet, t0)
     folders = data if isinstance(data, list) else [data]
     meta = {"data": [Path(d).name for d in folders], "frames": int(len(tr_idx)), "steps": trainer.step,
             "seed": cfg.seed, "augment_instructions": cfg.augment_instructions, "final": metrics}
     nets.export(trainer, out / "model.pt", meta)
-    write_atomic(out / "train_summary.json", dumps_json({"format": TRAIN_FORMAT, "config": cfg_doc, **meta}))
+    summary = {"format": TRAIN_FORMAT, "config": asdict(cfg), **meta}
+    write_atomic(out / "train_summary.json", dumps_json(summary))
     return metrics

@@ -51,7 +51,7 @@ CELL_M = 0.5
 _CELL_PAD = 1e-6
 
 
-def _polygonal(geom):
+def polygonal(geom):
     """The polygons of ``geom`` (make_valid and unions may add stray lines and points)."""
     parts = [g for g in shapely.get_parts(geom) if g.geom_type in ("Polygon", "MultiPolygon")]
     return shapely.union_all(parts) if parts else Polygon()
@@ -84,7 +84,7 @@ class DrivableArea:
     def from_net(cls, net: RoadNet) -> DrivableArea:
         lanes = lane_polygons(net)
         joints = joint_polygons(net)
-        return cls(close_and_widen(_polygonal(shapely.union_all([*lanes, *joints, carriageway(net)]))))
+        return cls(close_and_widen(polygonal(shapely.union_all([*lanes, *joints, carriageway(net)]))))
 
     def contains(self, x: float, y: float) -> bool:
         """Whether the point (x, y) m is drivable (a non-finite point is not)."""
@@ -126,22 +126,22 @@ def carriageway(net: RoadNet):
     for nid in sorted(car_nodes):
         shape = sn.getNode(nid).getShape()
         if len(shape) >= 3:
-            junctions.append(_polygonal(shapely.make_valid(Polygon([p[:2] for p in shape]))))
+            junctions.append(polygonal(shapely.make_valid(Polygon([p[:2] for p in shape]))))
     walking = []
     for edge in sn.getEdges(withInternal=True):
         if edge.getFunction() == "walkingarea":
             for lane in edge.getLanes():
                 shape = lane.getShape()
                 if len(shape) >= 3:
-                    walking.append(_polygonal(shapely.make_valid(Polygon([p[:2] for p in shape]))))
+                    walking.append(polygonal(shapely.make_valid(Polygon([p[:2] for p in shape]))))
     return shapely.difference(shapely.union_all(junctions), shapely.union_all(walking))
 
 
 def close_and_widen(area, closing: float = CLOSING_M, tolerance: float = TOLERANCE_M):
     """``area`` (shapely polygons, m) closed by ``closing`` m (gaps narrower than twice that
     filled, outlines otherwise kept) and then grown by ``tolerance`` m."""
-    closed = _polygonal(area.buffer(closing, join_style="mitre").buffer(-closing, join_style="mitre"))
-    return _polygonal(closed.buffer(tolerance, join_style="mitre")) if tolerance > 0 else closed
+    closed = polygonal(area.buffer(closing, join_style="mitre").buffer(-closing, join_style="mitre"))
+    return polygonal(closed.buffer(tolerance, join_style="mitre")) if tolerance > 0 else closed
 
 
 def lane_polygons(net: RoadNet) -> list:

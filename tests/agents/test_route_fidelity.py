@@ -261,7 +261,7 @@ def test_permissive_left_waits_for_an_oncoming_car_that_stands_at_the_start_of_g
 def test_permissive_left_waits_for_a_standing_queue_head_only_so_long(tmp_path):
     """Class D's wait is bounded: an oncoming car that never leaves its line (it may wait for
     something the ego cannot see) holds the ego for STANDING_WAIT s, not until the time-out."""
-    from icrsumo.agents.privileged import STANDING_WAIT
+    from icrsumo.agents.speed import STANDING_WAIT
 
     setup = _OncomingAtGreen(None)
     _, log, result = drive(tmp_path, route_through("Town01", ["-1", "-25", "-10"], lane=1),
@@ -356,9 +356,9 @@ def _outlines_only(net):
     no joints, no closing, no tolerance."""
     import shapely
 
-    from icrsumo.sim.drivable import DrivableArea, _polygonal, carriageway, lane_polygons
+    from icrsumo.sim.drivable import DrivableArea, carriageway, lane_polygons, polygonal
 
-    return DrivableArea(_polygonal(shapely.union_all([*lane_polygons(net), carriageway(net)])))
+    return DrivableArea(polygonal(shapely.union_all([*lane_polygons(net), carriageway(net)])))
 
 
 def test_a_sliver_between_lane_outlines_is_drivable():

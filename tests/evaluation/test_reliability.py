@@ -15,6 +15,7 @@ from icrsumo.cli import main
 from icrsumo.errors import InputError
 from icrsumo.evaluation import EvalOptions, report_only, run_evaluation
 from icrsumo.store import ResultStore
+from icrsumo.summary import EpisodeCounts
 from icrsumo.types import EpisodeRecord
 
 AGENTS = Path(__file__).parents[1] / "data" / "agents" / "user_agents.py"
@@ -256,7 +257,7 @@ def test_a_stored_route_that_cannot_be_reloaded_is_an_error_not_a_gap(suite, tmp
     own = tmp_path / "suite"
     shutil.copytree(suite, own)
     opts = _opts(tmp_path / "o", own, agents=("route-oracle",))
-    first = run_evaluation(opts).summary
+    first = run_evaluation(opts).stats
     manifest = next(own.glob("scenarios/*/scenario.json"))
     doc = json.loads(manifest.read_text())
     doc["net"] = doc["net"].replace(".net.xml", "_gone.net.xml")
@@ -265,7 +266,7 @@ def test_a_stored_route_that_cannot_be_reloaded_is_an_error_not_a_gap(suite, tmp
         run_evaluation(opts)
     capsys.readouterr()
     again = report_only(tmp_path / "o", quiet=True)  # the stored numbers, from the store alone
-    assert again["episodes"] == first["episodes"] == {"done": 2, "crashed": 0}
+    assert again.episodes == first.episodes == EpisodeCounts(done=2, crashed=0)
 
 
 @pytest.mark.sumo

@@ -54,7 +54,15 @@ def _start(out: Path, *extra: str, args: list[str] = ARGS, hold: Path | None = N
     args = [a.format(agent=_AGENT[0]) for a in args]
     env = {**os.environ, "ICRSUMO_TEST_HOLD": str(hold or "")}
     return subprocess.Popen([sys.executable, "-m", "icrsumo", "evaluate", *args, *extra, "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=_default_signals)
+
+
+def _default_signals() -> None:
+    """The run starts with SIGTERM and SIGHUP at their defaults, as from a shell: a test suite
+    started under nohup would pass SIGHUP on ignored, and icrsumo leaves an ignored SIGHUP be."""
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_DFL)
 
 
 def _children(pid: int) -> list[int]:

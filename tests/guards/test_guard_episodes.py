@@ -115,6 +115,6 @@ def test_attack_searches_behind_the_guard_too(tmp_path):
     # the report of an attack folder accounts for every stored episode, naming what its tables leave out
     from icrsumo.evaluation.run import report_only
 
-    ep = report_only(tmp_path / "a", quiet=True)["episodes"]
-    assert ep["done"] + ep["crashed"] + ep["stored_not_in_report"] == stored
-    assert "attack, transfer" in ep["stored_not_in_report_why"]
+    ep = report_only(tmp_path / "a", quiet=True).episodes
+    assert ep.done + ep.crashed + ep.stored_not_in_report == stored
+    assert "attack, transfer" in ep.stored_not_in_report_why

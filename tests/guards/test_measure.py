@@ -4,9 +4,10 @@ the shrink of the misleading Δ, flips prevented and caused, the paired loss tes
 from __future__ import annotations
 
 from icrsumo.aggregate import summarize
-from icrsumo.guards.measure import guard_doc, guard_markdown, split_row, template_number, text_holdout
+from icrsumo.guards.measure import guard_doc, split_row, template_number, text_holdout
 from icrsumo.guards.text import TextGuard
 from icrsumo.instructions.banks import load_banks
+from icrsumo.reporting.guard import guard_markdown
 from icrsumo.types import EpisodeRecord
 from icrsumo.vocab import EpisodeStatus
 

@@ -16,6 +16,7 @@ from threadpoolctl import threadpool_limits
 from icrsumo.errors import InputError
 from icrsumo.learn import nets
 from icrsumo.learn.collect import CollectOptions, collect
+from icrsumo.learn.config import config_dict
 from icrsumo.learn.exact import checkpoint as xck
 from icrsumo.learn.exact.graph import EXACT_LIMIT
 from icrsumo.learn.exact.model import ExactPolicy
@@ -38,7 +39,7 @@ def _float_checkpoint(path, encoder, **kw):
                            vocab=vocab, width=8, hidden=32, lang=16, embed=8, **kw)
     model = nets.build_model(cfg, seed=3)
     weights = {k: v.detach().float() for k, v in model.state_dict().items()}
-    nets.save({"format": nets.CHECKPOINT_FORMAT, "config": nets._cfg_dict(cfg), "model": weights,
+    nets.save({"format": nets.CHECKPOINT_FORMAT, "config": config_dict(cfg), "model": weights,
                "meta": {}}, path)
     return path
 
@@ -175,7 +176,7 @@ def test_export_exact_command(recorded, tmp_path):
     cfg = nets.ModelConfig(encoder="minilm-tuned", text_len=2 * 384, width=8, hidden=32, lang=16, embed=8)
     model = nets.build_model(cfg, seed=3)
     tuned = tmp_path / "tuned.pt"
-    nets.save({"format": nets.CHECKPOINT_FORMAT, "config": nets._cfg_dict(cfg),
+    nets.save({"format": nets.CHECKPOINT_FORMAT, "config": config_dict(cfg),
                "model": {k: v.detach().float() for k, v in model.state_dict().items()}, "meta": {}}, tuned)
     r = subprocess.run([*cmd[:4], str(tuned), *cmd[5:], "--out", str(tmp_path / "t.npz")],
                        capture_output=True, text=True, timeout=300)

@@ -148,7 +148,7 @@ def test_render_static_and_ego_layers_are_the_canvas_warp(town):
 def _ref_dynamic(r: BevRenderer, ego, vehicles, pedestrians, tl_states) -> np.ndarray:
     """Vehicles, pedestrians and traffic-light stop lines drawn as first written (arrays only):
     planes vehicles, pedestrians, stop (traffic lights only), go."""
-    from icrsumo.render import _CORNER_L, _CORNER_W, _ONE, _SHIFT, PEDESTRIAN_M
+    from icrsumo.render.bev import _CORNER_L, _CORNER_W, _ONE, _SHIFT, PEDESTRIAN_M
 
     sp, mpp = r.spec, r.spec.m_per_px
     ex, ey, yaw = ego

@@ -1,0 +1,54 @@
+"""The files of an evaluation's summary and records: summary.json, results.{md,csv,tex},
+statistics.{md,csv}, episodes.csv, figures/rd_to.png, figures/delta_bars.png and the
+leaderboard results files (as the run's scoring writes them, :mod:`icrsumo.scoring`)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from ..aggregate import EPISODE_COLUMNS, episode_table
+from ..fsio import dumps_json, write_atomic
+from ..scoring import DEFAULT_SCORING, get_scoring
+from ..summary import BASELINE, Summary
+from ..types import EpisodeRecord
+from .cells import csv_text, file_name
+from .figures import delta_bars, figure_or_note, rd_to_plane
+from .statistics import statistics_tables
+from .tables import tables
+
+
+def write_leaderboard(summary: Summary, records: Sequence[EpisodeRecord], out_dir: Path) -> None:
+    """leaderboard/<agent>_<family>.json (baseline included) for every agent and family with
+    records, in the layout of the summary's scoring."""
+    checkpoint = get_scoring(summary.scoring or DEFAULT_SCORING).leaderboard_file
+    for agent in summary.agents:
+        for fam in [BASELINE, *summary.families]:
+            cp = checkpoint(records, agent, fam)
+            if cp["_checkpoint"]["records"]:
+                write_atomic(Path(out_dir) / "leaderboard" / f"{file_name(agent)}_{file_name(fam)}.json",
+                             dumps_json(cp))
+
+
+def write_report(summary: Summary, records: Sequence[EpisodeRecord], out_dir: Path,
+                 ends: dict | None = None) -> str:
+    """Write summary.json, results.{md,csv,tex}, statistics.{md,csv}, episodes.csv, figures/rd_to.png,
+    figures/delta_bars.png and leaderboard/<agent>_<family>.json (baseline included) under
+    ``out_dir``; returns the Markdown table. ``ends``: the episodes' log facts for episodes.csv
+    (:func:`icrsumo.aggregate.episode_table`); paired rollout figures are written by the caller."""
+    out = Path(out_dir)
+    write_atomic(out / "summary.json", summary.to_json())
+    t = tables(summary)
+    write_atomic(out / "results.md", t["md"])
+    write_atomic(out / "results.csv", t["csv"])
+    write_atomic(out / "results.tex", t["tex"])
+    st = statistics_tables(summary)
+    write_atomic(out / "statistics.md", st["md"])
+    write_atomic(out / "statistics.csv", st["csv"])
+    rows = episode_table(records, ends)
+    write_atomic(out / "episodes.csv", csv_text(EPISODE_COLUMNS, ([row[c] for c in EPISODE_COLUMNS]
+                                                                   for row in rows)))
+    figure_or_note(rd_to_plane, summary, out / "figures" / "rd_to.png")
+    figure_or_note(delta_bars, summary, out / "figures" / "delta_bars.png")
+    write_leaderboard(summary, records, out)
+    return t["md"]
