@@ -232,8 +232,8 @@ def _speed(times: list[float], max_act_ms: float) -> Finding | None:
     if mean_ms > max_act_ms:
         hours = mean_ms / 1000 * DEFAULT_RUN_EPISODES * 300 / 3600  # ~300 decisions per tiny episode
         return Finding(False, f"too slow: act() takes {mean_ms:.0f} ms on average (max "
-                              f"{worst_ms:.0f} ms), over the {max_act_ms:g} ms budget "
-                              f"(--max-act-ms); the default evaluation would spend about "
+                              f"{worst_ms:.0f} ms), over the {max_act_ms:g} ms budget; "
+                              f"the default evaluation would spend about "
                               f"{hours:.1f} h in act()")
     return Finding(True, f"speed: act() {mean_ms:.2f} ms on average (max {worst_ms:.2f} ms)")
 

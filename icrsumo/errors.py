@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import re
+import sys
 import unicodedata
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 #: the character that brackets a mention of a field in an error's text (``str(Field(name))``)
@@ -67,6 +69,28 @@ class InputError(Exception):
             text += f" (fix: {self.fix})"
         text = _MENTION.sub(lambda m: names(m.group(1)), text)
         return visible(display_url(" ".join(text.split())))
+
+
+#: how notes name fields now: the Python API by keyword; the CLI installs its options' names
+_NOTE_NAMES: list[Callable[[str], str]] = [_as_named]
+
+
+def note(text: str, kind: str = "note") -> None:
+    """Print ``icrsumo: KIND: text`` as one line on stderr, every field mentioned in ``text``
+    (``str(Field(name))``) named in the reader's words: by keyword in Python, by option under
+    the command line (:func:`naming_fields`)."""
+    line = " ".join(_MENTION.sub(lambda m: _NOTE_NAMES[-1](m.group(1)), text).split())
+    print(f"icrsumo: {kind}: {visible(display_url(line))}", file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def naming_fields(names: Callable[[str], str]) -> Iterator[None]:
+    """While inside, :func:`note` names fields by ``names(field)`` (the CLI: its options)."""
+    _NOTE_NAMES.append(names)
+    try:
+        yield
+    finally:
+        _NOTE_NAMES.pop()
 
 
 #: the password of a URL's user info: ``scheme://user:PASSWORD@`` (up to the authority's last @)

@@ -26,7 +26,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 
 from ..devices import check_device
-from ..errors import Field, InputError
+from ..errors import Field, InputError, note
 from .batching import BatchingCore, Task
 from .identity import fingerprint
 from .registry import agent_factory, agent_name
@@ -220,10 +220,9 @@ def serve(spec: str, host: str = "127.0.0.1", port: int = 8765, max_batch: int =
     key = shared_key(key_env, Field("key_env"), key_env) if key_env is not None else None
     server = AgentServer(spec, host, port, max_batch, device=device, key=key)
     if key is None and host not in _LOOPBACK and not host.startswith("127."):
-        print(f"icrsumo: warning: serving on {host}: every machine that can reach port {server.port} can "
-              f"drive this agent and read its answers (the server has no authentication); start it with "
-              f"--key-env VAR (a shared key in VAR) and give clients remote:URL?key_env=VAR",
-              file=sys.stderr, flush=True)
+        note(f"serving on {host}: every machine that can reach port {server.port} can drive this agent "
+             f"and read its answers (the server has no authentication); start it with {Field('key_env')} "
+             "VAR (a shared key in VAR) and give clients remote:URL?key_env=VAR", kind="warning")
     print(f"icrsumo: serving agent {server.name!r} ({spec}) on {server.url} (protocol {PROTOCOL}, "
           f"{'act_batch' if server.batch_hook else 'act per session'}, max batch {max_batch}); "
           f"Ctrl-C stops", file=sys.stderr, flush=True)

@@ -10,7 +10,7 @@ import sys
 import threading
 from pathlib import Path
 
-from ..errors import InputError, visible
+from ..errors import InputError, naming_fields, visible
 from . import SUBCOMMANDS, registry
 from .options import names
 
@@ -92,7 +92,8 @@ def main(argv: list[str] | None = None) -> int:
     old = _stop_on_signals()
     try:
         _check_out(args)
-        return args.func(args)
+        with naming_fields(names(args.command)):  # the library's notes name options here
+            return args.func(args)
     except InputError as err:
         if args.debug:
             raise

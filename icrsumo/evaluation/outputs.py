@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from ..convert import safe_name
-from ..errors import InputError
+from ..errors import Field, InputError, note
 from ..instructions.families import ALL_FAMILIES
 from ..scenario import find_scenarios, read_scenario
 from ..store import ResultStore
@@ -40,9 +40,9 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     answers: dict = {}
     decisions = episode_decisions(store, records, instr_dir, ends, answers)
     if rescored_short:
-        print(f"icrsumo: note: {rescored_short} episodes ended, under the rules they were run with, "
-              f"before {opts.scoring}'s rules would have ended them: they are scored on what was simulated "
-              f"(run them with --scoring {opts.scoring} for the full episodes)", file=sys.stderr)
+        note(f"{rescored_short} episodes ended, under the rules they were run with, before "
+             f"{opts.scoring}'s rules would have ended them: they are scored on what was simulated "
+             f"(run them with {Field('scoring')} {opts.scoring} for the full episodes)")
     why = ""
     if not_shown:
         why = not_shown_why or (f"they are of other agents, routes, families or k (icrsumo report {out} "

@@ -17,7 +17,7 @@ from ..agents.registry import (
     agent_name,
     python_agent,
 )
-from ..errors import Field, InputError, display_url, short, visible
+from ..errors import Field, InputError, display_url, note, short, visible
 from ..fsio import FolderLock
 from ..guards.base import guarded_fingerprint, guarded_name
 from ..instructions.families import ALL_FAMILIES, FAMILIES
@@ -235,9 +235,8 @@ def claim_agents(store: ResultStore, ids: AgentIds, replacing: tuple[str, ...]) 
 
     doomed = store.replaceable(ids.fingerprints, replacing)
     for name in store.claim_agents(ids.fingerprints, replacing):
-        print(f"icrsumo: note: the stored episodes of {visible(name)} were stored before icrsumo kept agent "
-              f"fingerprints; they are taken as this agent's (--replace-agent {visible(name)} runs them "
-              "again)", file=sys.stderr)
+        note(f"the stored episodes of {name} were stored before icrsumo kept agent fingerprints; they "
+             f"are taken as this agent's ({Field('replace_agents')} {name} runs them again)")
     for name, (n, fps) in doomed.items():
         old = ", ".join(short_fp(fp) if fp else "none (stored before fingerprints)" for fp in fps)
         what = (f"deleted {n} stored episode{'s' * (n != 1)} of the agent of fingerprint {old}" if n else
