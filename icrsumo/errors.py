@@ -83,6 +83,11 @@ def note(text: str, kind: str = "note") -> None:
     print(f"icrsumo: {kind}: {visible(display_url(line))}", file=sys.stderr, flush=True)
 
 
+def note_names() -> Callable[[str], str]:
+    """How notes name fields now (for an error quoted in a note: ``err.line(note_names())``)."""
+    return _NOTE_NAMES[-1]
+
+
 @contextlib.contextmanager
 def naming_fields(names: Callable[[str], str]) -> Iterator[None]:
     """While inside, :func:`note` names fields by ``names(field)`` (the CLI: its options)."""

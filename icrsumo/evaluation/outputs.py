@@ -4,11 +4,10 @@ the summary, :mod:`icrsumo.reporting` writes them)."""
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from ..convert import safe_name
-from ..errors import Field, InputError, note
+from ..errors import Field, InputError, note, note_names
 from ..instructions.families import ALL_FAMILIES
 from ..scenario import find_scenarios, read_scenario
 from ..store import ResultStore
@@ -47,7 +46,7 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     if not_shown:
         why = not_shown_why or (f"they are of other agents, routes, families or k (icrsumo report {out} "
                                 f"shows all)")
-        print(f"icrsumo: note: {not_shown} stored episodes are not in this report: {why}", file=sys.stderr)
+        note(f"{not_shown} stored episodes are not in this report: {why}")
     summary = summarize(records, suite=opts.suite, seed=opts.seed, k=opts.k, families=families,
                         scoring=opts.scoring, digest=digest, decisions=decisions, answers=answers,
                         rescored_short=rescored_short, not_in_report=not_shown, not_in_report_why=why)
@@ -60,7 +59,7 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
         rollout_figure(out, store, records, scenarios, instr_dir, route=opts.rollout_route, seed=opts.seed,
                        families=opts.families)
     except InputError as err:  # the figure is optional; the numbers are all in the tables
-        print(f"icrsumo: note: no rollout figure: {err.line()}", file=sys.stderr)
+        note(f"no rollout figure: {err.line(note_names())}")
     if not opts.quiet:
         print(table)
     return summary
@@ -94,7 +93,7 @@ def store_digest(store: ResultStore, scoring: str) -> str | None:
     try:
         return run_digest(store, scoring)
     except InputError as err:
-        print(f"icrsumo: note: no digest: {err.line()}", file=sys.stderr)
+        note(f"no digest: {err.line(note_names())}")
         return None
 
 
@@ -201,9 +200,9 @@ def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_di
                     "end_t": round(log.t[-1], 2), "end_pos": round(log.progress[-1], 1),
                     "end_x": round(log.x[-1], 1), "end_y": round(log.y[-1], 1)}
     if unreadable:
-        print(f"icrsumo: note: no decision attribution for {len(unreadable)} routes whose instruction file "
-              f"cannot be read (first: {unreadable[0]})", file=sys.stderr)
+        note(f"no decision attribution for {len(unreadable)} routes whose instruction file cannot be "
+             f"read (first: {unreadable[0]})")
     if damaged:
-        print(f"icrsumo: note: {len(damaged)} stored episode logs cannot be read, so their decisions are "
-              f"not in the attribution (first: {damaged[0]})", file=sys.stderr)
+        note(f"{len(damaged)} stored episode logs cannot be read, so their decisions are not in the "
+             f"attribution (first: {damaged[0]})")
     return out

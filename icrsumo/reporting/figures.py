@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import visible
+from ..errors import note, visible
 from ..fsio import write_atomic
 from ..summary import BASELINE, Summary
 from ..vocab import Family
@@ -64,8 +64,7 @@ def figure_or_note(draw: Any, *args: Any) -> None:
     except OSError:
         raise
     except Exception as err:  # noqa: BLE001 - matplotlib's many ways to fail on odd text
-        print(f"icrsumo: note: no figure {Path(args[-1]).name}: {type(err).__name__}: "
-              f"{visible(' '.join(str(err).split())[:160])}", file=sys.stderr)
+        note(f"no figure {Path(args[-1]).name}: {type(err).__name__}: {' '.join(str(err).split())[:160]}")
 
 
 def _agent_colours(agents: Sequence[str]) -> dict[str, Any]:
