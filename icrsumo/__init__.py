@@ -1,6 +1,6 @@
 """icrsumo: instruction-robustness evaluation of language-conditioned driving agents on SUMO.
 
-The Python API (:mod:`icrsumo.api`) is exported here and imported on first use, so that
+The Python API (:mod:`icrsumo.app.api`) is exported here and imported on first use, so that
 ``import icrsumo`` stays light: ``icrsumo.evaluate(...)``, ``icrsumo.load_suite(...)``,
 ``icrsumo.run_episode(...)``, ``icrsumo.digest(out)``, ``icrsumo.compare_digests(out, other)``.
 """
@@ -9,25 +9,30 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from icrsumo.compat import install as _install_moved
+
 __version__ = "0.1.0"
 
 #: public name -> the module that defines it (imported on first access)
 _LAZY = {
-    "evaluate": "icrsumo.api",
-    "load_suite": "icrsumo.api",
-    "Suite": "icrsumo.api",
+    "evaluate": "icrsumo.app.api",
+    "load_suite": "icrsumo.app.api",
+    "Suite": "icrsumo.app.api",
     "EvalResult": "icrsumo.evaluation.run",
-    "run_episode": "icrsumo.api",
-    "digest": "icrsumo.api",
-    "compare_digests": "icrsumo.api",
+    "run_episode": "icrsumo.app.api",
+    "digest": "icrsumo.app.api",
+    "compare_digests": "icrsumo.app.api",
 }
 
 __all__ = ["EvalResult", "Suite", "__version__", "compare_digests", "digest", "evaluate", "load_suite",
            "run_episode"]
 
 if TYPE_CHECKING:
-    from .api import Suite, compare_digests, digest, evaluate, load_suite, run_episode
-    from .evaluation.run import EvalResult
+    from icrsumo.app.api import Suite, compare_digests, digest, evaluate, load_suite, run_episode
+    from icrsumo.evaluation.run import EvalResult
+
+
+_install_moved()  # old module names (icrsumo.routes, ...) keep importing: icrsumo.compat
 
 
 def __getattr__(name: str) -> Any:

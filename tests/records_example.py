@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from icrsumo.types import EpisodeRecord
+from icrsumo.core.types import EpisodeRecord
 
 TERM = {"done": "completed", "RD": "route_deviation", "TO": "route_timeout"}
 

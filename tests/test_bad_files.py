@@ -15,9 +15,9 @@ from pathlib import Path
 
 import pytest
 
-from icrsumo.cli import main
-from icrsumo.errors import InputError
-from icrsumo.resources import bundled_towns, data_dir
+from icrsumo.app.cli.main import main
+from icrsumo.core.errors import InputError
+from icrsumo.core.resources import bundled_towns, data_dir
 
 DATA = Path(__file__).parent / "data"
 SMALL_NET = data_dir("networks") / "icr_rural.net.xml"
@@ -66,8 +66,8 @@ _XML = _xml_cases()
 
 @pytest.mark.parametrize("case", list(_XML))
 def test_unsafe_or_foreign_xml_is_one_line(tmp_path, case):
-    from icrsumo.networks import load_net
-    from icrsumo.routes import check_xml_file, read_routes
+    from icrsumo.world.networks import load_net
+    from icrsumo.world.routes import check_xml_file, read_routes
 
     p = tmp_path / "evil.net.xml"
     p.write_bytes(_XML[case])
@@ -80,7 +80,7 @@ def test_unsafe_or_foreign_xml_is_one_line(tmp_path, case):
 
 
 def test_missing_folder_and_unreadable_xml(tmp_path):
-    from icrsumo.routes import check_xml_file
+    from icrsumo.world.routes import check_xml_file
 
     for p in (tmp_path / "missing.net.xml", tmp_path):
         with pytest.raises(InputError) as err:
@@ -89,7 +89,7 @@ def test_missing_folder_and_unreadable_xml(tmp_path):
 
 
 def test_every_bundled_net_passes_the_check():
-    from icrsumo.routes import check_xml_file
+    from icrsumo.world.routes import check_xml_file
 
     towns = bundled_towns()
     assert towns
@@ -180,7 +180,7 @@ def test_convert_with_hostile_xodr_or_route_file_writes_nothing(tmp_path, capsys
     ("x", "12abc", "x='12abc' is not a number"),
 ])
 def test_waypoint_numbers_out_of_range(tmp_path, attr, value, problem):
-    from icrsumo.routes import read_routes
+    from icrsumo.world.routes import read_routes
 
     wp = {"x": "1", "y": "2", attr: value}
     attrs = " ".join(f'{k}="{v}"' for k, v in wp.items())
@@ -294,10 +294,10 @@ def test_template_bank_encodings(banks_dir, encoding, expect):
 @pytest.fixture(scope="module")
 def converted_one(tmp_path_factory) -> tuple[Path, Path]:
     """One bundled route converted (no traffic) and its instructions (K=1): (scenarios, instructions)."""
-    from icrsumo.convert import ConvertOptions, convert_routes
+    from icrsumo.core.resources import bundled_suites
     from icrsumo.instructions.generate import GenerateOptions, generate
-    from icrsumo.resources import bundled_suites
-    from icrsumo.routes import format_routes, read_routes
+    from icrsumo.world.convert import ConvertOptions, convert_routes
+    from icrsumo.world.routes import format_routes, read_routes
 
     root = tmp_path_factory.mktemp("bad_files")
     specs, _ = read_routes(bundled_suites()["tiny"])
@@ -435,7 +435,7 @@ _SCENARIO_CASES = [
 @pytest.mark.parametrize(("keys", "value", "expect"), _SCENARIO_CASES,
                          ids=[c[2].split(":")[0] for c in _SCENARIO_CASES])
 def test_scenario_manifest_wrong_types(converted_one, tmp_path, keys, value, expect):
-    from icrsumo.scenario import read_scenario
+    from icrsumo.world.scenario import read_scenario
 
     sc = _copy_scenario(converted_one, tmp_path)
     mpath = sc / "scenario.json"
@@ -449,7 +449,7 @@ def test_scenario_manifest_wrong_types(converted_one, tmp_path, keys, value, exp
 
 
 def test_scenario_sumo_files_missing_or_hostile(converted_one, tmp_path, capsys):
-    from icrsumo.scenario import read_scenario
+    from icrsumo.world.scenario import read_scenario
 
     sc = _copy_scenario(converted_one, tmp_path)
     read_scenario(sc)  # the copy is whole
@@ -509,7 +509,7 @@ def test_scenario_sumo_files_missing_or_hostile(converted_one, tmp_path, capsys)
     (lambda d: d.update(format="something/1"), "format: unsupported format 'something/1'"),
 ])
 def test_scenario_index_damaged(converted_one, tmp_path, edit, expect):
-    from icrsumo.scenario import find_scenarios
+    from icrsumo.world.scenario import find_scenarios
 
     sc = _copy_scenario(converted_one, tmp_path)
     index = sc.parent.parent / "index.json"
@@ -533,9 +533,9 @@ def test_scenario_index_damaged(converted_one, tmp_path, edit, expect):
     (lambda d: d.update(steps=None), "steps: expected an object"),
 ])
 def test_episode_log_wrong_types(tmp_path, edit, expect):
-    from test_logs import make_log
+    from results.test_logs import make_log
 
-    from icrsumo.logs import log_to_dict, read_log
+    from icrsumo.results.logs import log_to_dict, read_log
 
     d = log_to_dict(make_log())
     edit(d)
@@ -554,9 +554,9 @@ def test_episode_log_wrong_types(tmp_path, edit, expect):
     ("folder", "cannot read episode log: it is a folder"),
 ])
 def test_episode_log_encodings(tmp_path, raw, expect):
-    from test_logs import make_log
+    from results.test_logs import make_log
 
-    from icrsumo.logs import dumps_log, read_log
+    from icrsumo.results.logs import dumps_log, read_log
 
     p = tmp_path / "ep.json"
     text = dumps_log(make_log()).replace('"agent": "', '"agent": "é', 1)

@@ -9,11 +9,11 @@ from collections import Counter
 
 import pytest
 
-from icrsumo.convert import ConvertOptions, convert_routes
-from icrsumo.networks import load_net
-from icrsumo.resources import bundled_suites, suite_coords
-from icrsumo.routes import read_routes
-from icrsumo.scenario import find_scenarios, read_scenario
+from icrsumo.core.resources import bundled_suites, suite_coords
+from icrsumo.world.convert import ConvertOptions, convert_routes
+from icrsumo.world.networks import load_net
+from icrsumo.world.routes import read_routes
+from icrsumo.world.scenario import find_scenarios, read_scenario
 
 CARLA_TOWNS = ("Town01", "Town02", "Town03", "Town04", "Town05", "Town06", "Town07", "Town10HD")
 LANGAUTO = ("langauto-tiny", "langauto-short", "langauto-long")

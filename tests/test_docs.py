@@ -51,7 +51,7 @@ def test_every_page_reads_right_on_a_code_host_and_its_names_come_from_the_code(
 
 
 def test_the_evaluate_synopsis_names_every_option():
-    from icrsumo.cli import build_parser
+    from icrsumo.app.cli.main import build_parser
 
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))

@@ -1,7 +1,7 @@
 """Errors name fields, not command-line options: the library's InputErrors carry the field
-they are about (:class:`icrsumo.errors.Field`); the Python API names it by its keyword, the
-command line by its option (one table in :mod:`icrsumo.app.options`); no module but the command
-line's (icrsumo/app/, icrsumo/cli.py) names an option in an error's text; ``icrsumo.run_episode``
+they are about (:class:`icrsumo.core.errors.Field`); the Python API names it by its keyword, the
+command line by its option (one table in :mod:`icrsumo.app.cli.options`); no module but the command
+line's (icrsumo/app/cli/, icrsumo/cli.py) names an option in an error's text; ``icrsumo.run_episode``
 refuses what ``icrsumo run-episode`` refuses; the parser is one small module per subcommand."""
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ from pathlib import Path
 import pytest
 
 import icrsumo
-import icrsumo.app
-from icrsumo.app import options
-from icrsumo.cli import build_parser, main
-from icrsumo.errors import Field, InputError
-from icrsumo.resources import bundled_suites
+import icrsumo.app.cli
+from icrsumo.app.cli import options
+from icrsumo.app.cli.main import build_parser, main
+from icrsumo.core.errors import Field, InputError
+from icrsumo.core.resources import bundled_suites
 
 PACKAGE = Path(icrsumo.__file__).parent
 #: a command-line option in a text
@@ -43,7 +43,7 @@ def _docstrings(tree: ast.AST) -> set[int]:
 
 def _skipped(tree: ast.AST) -> set[int]:
     """The strings that are no message: the arguments of another program's command line
-    (``--option`` words in a list or tuple). Notes are messages too (:func:`icrsumo.errors.note`
+    (``--option`` words in a list or tuple). Notes are messages too (:func:`icrsumo.core.errors.note`
     names fields in the reader's words)."""
     skip = set()
     for node in ast.walk(tree):
@@ -71,7 +71,7 @@ def _options_named(source: str, rel: str) -> list[str]:
 
 
 #: the command line's modules, which name options
-CLI = [PACKAGE / "cli.py", *sorted((PACKAGE / "app").glob("*.py"))]
+CLI = sorted((PACKAGE / "app" / "cli").glob("*.py"))
 
 
 def test_no_module_but_the_cli_names_an_option_in_an_error():
@@ -152,7 +152,7 @@ def _bad_manifest(sc_dir: Path, tmp: Path) -> Path:
 ])
 def test_run_episode_refuses_what_the_command_line_refuses(cache, tmp_path, capsys, case, python,
                                                            command_line):
-    from icrsumo.bundled import bundled_route
+    from icrsumo.evaluation.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
 
     sc_dir, instr = bundled_route("tiny_003")
@@ -171,17 +171,17 @@ def test_run_episode_refuses_what_the_command_line_refuses(cache, tmp_path, caps
 
 
 def test_the_parser_is_one_small_module_per_subcommand(capsys):
-    """Every subcommand is its own module of :data:`icrsumo.app.SUBCOMMANDS`, whose functions are
+    """Every subcommand is its own module of :data:`icrsumo.app.cli.SUBCOMMANDS`, whose functions are
     each under 120 lines, and the bundled suites are named from the installation, never written
     out in the CLI."""
     added = []
-    for module in icrsumo.app.SUBCOMMANDS:
+    for module in icrsumo.app.cli.SUBCOMMANDS:
         sub = argparse.ArgumentParser().add_subparsers()
         module.add(sub)
         assert len(sub.choices) == 1, module.__name__  # one subcommand per module
         added += sub.choices
     assert added == list(build_parser()._subparsers._group_actions[0].choices)
-    for module in icrsumo.app.SUBCOMMANDS:
+    for module in icrsumo.app.cli.SUBCOMMANDS:
         functions = [f for _, f in inspect.getmembers(module, inspect.isfunction)
                      if f.__module__ == module.__name__]
         assert {"add", "run"} <= {f.__name__ for f in functions}, module.__name__
@@ -196,8 +196,8 @@ def test_the_parser_is_one_small_module_per_subcommand(capsys):
 
 
 def test_notes_name_fields_in_the_readers_words(capsys):
-    from icrsumo.app.options import names
-    from icrsumo.errors import Field, naming_fields, note
+    from icrsumo.app.cli.options import names
+    from icrsumo.core.errors import Field, naming_fields, note
 
     note(f"run it with {Field('replace_agents')} x\x1b[2J")
     with naming_fields(names("evaluate")):

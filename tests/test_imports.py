@@ -1,8 +1,9 @@
 """The package's import graph (every import statement, also those inside functions): no cycle,
-libsumo imported by the simulator backend alone, no import from ``agents/`` or ``learn/``
-into the closed loop's internals (they may use ``icrsumo.sim.episode`` and
-``icrsumo.sim.callbacks``, the loop's public side), and the command line (``icrsumo.app``) on
-top, imported by nothing of the library."""
+libsumo imported by the simulator backend alone, no import from ``agents/`` or ``learn/`` into
+the closed loop's internals (they may use ``icrsumo.sim.episode`` and ``icrsumo.sim.callbacks``,
+the loop's public side), the layers (:data:`LAYERS`) never imported upwards, the command line
+(``icrsumo.app.cli``) on top, imported by nothing of the library, and the old module names still
+importing."""
 
 from __future__ import annotations
 
@@ -124,23 +125,86 @@ def test_agents_and_learn_stay_out_of_the_loop_internals():
     assert bad == []
 
 
-#: the application layer, the ``icrsumo`` command: ``icrsumo.app`` and its entry points
-APP = ("icrsumo.app", "icrsumo.cli", "icrsumo.__main__")
+#: the layers, bottom to top (docs/layout.md): a module may import its own layer and those below
+#: it, never one above. A module's layer is the longest prefix of its name in this table.
+LAYERS = (
+    ("icrsumo.core",),
+    ("icrsumo.world",),
+    ("icrsumo.scoring", "icrsumo.render"),
+    ("icrsumo.instructions",),
+    ("icrsumo.agents",),
+    ("icrsumo.guards",),
+    ("icrsumo.agents.hosting",),
+    ("icrsumo.sim",),
+    ("icrsumo.learn",),
+    ("icrsumo.results",),
+    ("icrsumo.reporting",),
+    ("icrsumo.evaluation",),
+    ("icrsumo.app",),
+    ("icrsumo.app.cli", "icrsumo.compat", "icrsumo.__main__"),
+)
+
+
+def _layer(module: str) -> int:
+    best, found = -1, -1
+    for i, prefixes in enumerate(LAYERS):
+        for top in prefixes:
+            if (module == top or module.startswith(top + ".")) and len(top) > best:
+                best, found = len(top), i
+    return found
+
+
+def test_every_module_has_a_layer():
+    assert sorted(m for m in _modules() if m != "icrsumo" and _layer(m) < 0) == []
+
+
+def test_no_import_points_up_a_layer():
+    """Each import stays in its layer or goes down (``icrsumo/__init__`` is exempt: it installs
+    the old names and exports the API lazily)."""
+    bad = sorted((name, dep) for name, deps in _graph().items() if name != "icrsumo"
+                 for dep in deps if _layer(dep) > _layer(name))
+    assert bad == []
 
 
 def test_the_command_line_is_the_top_layer():
-    """Nothing of the library imports the command line: ``icrsumo.app`` is imported by its own
-    modules, ``icrsumo.cli`` and ``icrsumo.__main__`` alone, and the app never imports the
-    ``icrsumo.cli`` that re-exports it."""
+    """Nothing of the library imports the command line: ``icrsumo.app.cli`` is imported by its own
+    modules and ``icrsumo.__main__`` alone."""
     graph = _graph()
-    assert "icrsumo.app.main" in graph["icrsumo.cli"]
 
-    def app(module: str) -> bool:
-        return any(module == top or module.startswith(top + ".") for top in APP)
+    def cli(module: str) -> bool:
+        return module == "icrsumo.app.cli" or module.startswith("icrsumo.app.cli.")
 
-    bad = sorted((name, dep) for name, deps in graph.items() for dep in deps if app(dep) and not app(name))
+    bad = sorted((name, dep) for name, deps in graph.items() for dep in deps
+                 if cli(dep) and not cli(name) and name != "icrsumo.__main__")
     assert bad == []
-    assert sorted(name for name, deps in graph.items() if "icrsumo.cli" in deps) == ["icrsumo.__main__"]
+
+
+def test_old_module_names_give_the_moved_modules():
+    """Every name in :data:`icrsumo.compat.MOVED` imports, as the very module at its new place,
+    with a DeprecationWarning that names the new place; ``python -m icrsumo`` and the console
+    script's target exist."""
+    import importlib
+    import sys
+    import warnings
+
+    from icrsumo.compat import MOVED
+
+    for old, new in MOVED.items():
+        sys.modules.pop(f"icrsumo.{old}", None)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            module = importlib.import_module(f"icrsumo.{old}")
+        assert module is importlib.import_module(f"icrsumo.{new}"), old
+        assert any(issubclass(w.category, DeprecationWarning) and f"icrsumo.{new}" in str(w.message)
+                   for w in caught), old
+        assert f"icrsumo.{new}" in _modules(), new
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        from icrsumo import errors, routes
+        from icrsumo.core import errors as errors_now
+    assert errors is errors_now and routes.__name__ == "icrsumo.world.routes"
+    script = re.search(r'^icrsumo = "([\w.]+):(\w+)"', (ROOT.parent / "pyproject.toml").read_text(), re.M)
+    assert script and hasattr(importlib.import_module(script.group(1)), script.group(2))
 
 
 def _top_level_names(path: Path) -> set[str]:
@@ -168,7 +232,7 @@ def test_torch_and_matplotlib_stay_in_their_corners():
     the report's figures (docs/layout.md)."""
     torch = sorted(name for name, path in _modules().items() if "torch" in _top_level_names(path))
     outside_learn = [n for n in torch if not n.startswith("icrsumo.learn.")]
-    assert outside_learn == ["icrsumo.agents.batched", "icrsumo.devices"]
+    assert outside_learn == ["icrsumo.agents.hosting.batched", "icrsumo.core.devices"]
     plots = [name for name, path in _modules().items() if "matplotlib" in _top_level_names(path)]
     assert plots and [n for n in plots if not n.startswith("icrsumo.reporting.")] == []
 
@@ -178,7 +242,7 @@ def test_only_the_inference_runtime_imports_onnxruntime():
     assert users == ["icrsumo.learn.runtime"]
 
 
-#: a Sphinx cross-reference to something of the package (``:mod:`~icrsumo.agents.watch```)
+#: a Sphinx cross-reference to something of the package (``:mod:`~icrsumo.agents.hosting.watch```)
 _XREF = re.compile(r":(?:mod|func|class|data|meth|attr|exc):`~?(icrsumo(?:\.\w+)+)`")
 
 
@@ -214,17 +278,21 @@ def test_docstrings_name_modules_that_exist():
 
 
 def test_the_bundled_suite_pipeline_keeps_its_old_name_and_one_default_suite():
-    """``icrsumo.bundled`` is the bundled-suite pipeline, ``icrsumo.cache`` (its old name) re-exports
-    it, and the default suite is defined once, in ``icrsumo.defaults``."""
-    import icrsumo.bundled
-    import icrsumo.cache
+    """``icrsumo.evaluation.bundled`` is the bundled-suite pipeline, ``icrsumo.cache`` (its old
+    name) still gives it, and the default suite is defined once, in ``icrsumo.core.defaults``."""
+    import warnings
 
-    assert icrsumo.cache.bundled_route is icrsumo.bundled.bundled_route
-    assert icrsumo.cache.cache_root is icrsumo.bundled.cache_root
+    import icrsumo.evaluation.bundled
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        import icrsumo.cache
+
+    assert icrsumo.cache.bundled_route is icrsumo.evaluation.bundled.bundled_route
+    assert icrsumo.cache.cache_root is icrsumo.evaluation.bundled.cache_root
     defined = sorted(name for name, path in _modules().items()
                      for n in ast.parse(path.read_text(encoding="utf-8")).body if isinstance(n, ast.Assign)
                      for t in n.targets if isinstance(t, ast.Name) and t.id == "DEFAULT_SUITE")
-    assert defined == ["icrsumo.defaults"]
+    assert defined == ["icrsumo.core.defaults"]
 
 
 REPO = ROOT.parent
@@ -266,12 +334,12 @@ def _private_uses(source: str, tools: set[str]) -> list[str]:
 
 
 def test_the_private_name_scan_finds_every_form():
-    src = ("from icrsumo.convert import _sumocfg, ConvertOptions\n"
+    src = ("from icrsumo.world.convert import _sumocfg, ConvertOptions\n"
            "import icrsumo.sim.drivable as d\nimport icrsumo.render\nfrom icrsumo.learn import minilm\n"
            "from make_routes import _onward\nimport os\n"
            "d._polygonal(1); icrsumo.render._layer; minilm._PARTS; os._exit; d.__name__; minilm.WIDTH\n")
     assert _private_uses(src, {"make_routes"}) == [
-        "1: icrsumo.convert._sumocfg", "5: make_routes._onward",
+        "1: icrsumo.world.convert._sumocfg", "5: make_routes._onward",
         "7: d._polygonal", "7: icrsumo.render._layer", "7: minilm._PARTS"]
 
 

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from icrsumo.networks import load_net
-from icrsumo.resources import bundled_suites, bundled_towns, suite_coords
-from icrsumo.routes import read_routes
+from icrsumo.core.resources import bundled_suites, bundled_towns, suite_coords
+from icrsumo.world.networks import load_net
+from icrsumo.world.routes import read_routes
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
@@ -114,11 +114,11 @@ def test_convert_routes_needs_no_flags_for_a_langauto_suite(tmp_path):
 @pytest.mark.sumo
 def test_a_langauto_route_runs_by_suite_name_alone(cache):
     from icrsumo.agents.privileged import RouteOracle
-    from icrsumo.bundled import bundled_route
+    from icrsumo.evaluation.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.scenario import read_scenario
     from icrsumo.scoring import score_episode
     from icrsumo.sim.episode import run_episode
+    from icrsumo.world.scenario import read_scenario
 
     sc_dir, instr = bundled_route("0", "langauto-tiny")
     sc = read_scenario(sc_dir)

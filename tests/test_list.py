@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 
 from icrsumo.agents.registry import DEFAULT_AGENT, REGISTRY
-from icrsumo.cli import main
-from icrsumo.resources import bundled_suites
-from icrsumo.vocab import ALL_FAMILIES, CONTROL_FAMILIES, FAMILY_DESCRIPTIONS, Family
+from icrsumo.app.cli.main import main
+from icrsumo.core.resources import bundled_suites
+from icrsumo.core.vocab import ALL_FAMILIES, CONTROL_FAMILIES, FAMILY_DESCRIPTIONS, Family
 
 
 def _lines(capsys, *argv):

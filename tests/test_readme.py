@@ -15,9 +15,9 @@ from pathlib import Path
 import pytest
 
 import icrsumo
-from icrsumo.convert import CONVERTER_VERSION
 from icrsumo.evaluation import EvalResult
-from icrsumo.scenario import Scenario
+from icrsumo.world.convert import CONVERTER_VERSION
+from icrsumo.world.scenario import Scenario
 
 pytestmark = pytest.mark.sumo
 

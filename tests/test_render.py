@@ -9,9 +9,9 @@ import cv2
 import numpy as np
 import pytest
 
-from icrsumo import resources
-from icrsumo.networks import load_net
+from icrsumo.core import resources
 from icrsumo.render import CHANNELS, BevRenderer, BevSpec, VideoWriter, to_rgb
+from icrsumo.world.networks import load_net
 
 SPEC = BevSpec()
 ROW0, COL0 = int(SPEC.ego_row), int(SPEC.ego_col)  # 96, 64

@@ -13,9 +13,9 @@ import sys
 
 import pytest
 
-from icrsumo.errors import InputError
+from icrsumo.core.errors import InputError
+from icrsumo.core.resources import data_dir
 from icrsumo.instructions.banks import load_banks
-from icrsumo.resources import data_dir
 
 KEY = "ключ-✓"
 

@@ -8,10 +8,10 @@ from __future__ import annotations
 import csv
 import io
 
-from icrsumo.aggregate import summarize
-from icrsumo.report import csv_cell, delta_bars, figure_or_note, md_cell, rd_to_plane, tables
-from icrsumo.types import EpisodeRecord
-from icrsumo.vocab import EpisodeStatus
+from icrsumo.compat.report import csv_cell, delta_bars, figure_or_note, md_cell, rd_to_plane, tables
+from icrsumo.core.types import EpisodeRecord
+from icrsumo.core.vocab import EpisodeStatus
+from icrsumo.results.aggregate import summarize
 
 HOSTILE = "=HYPERLINK(\"x\") | $\\frac{$ _100%\nnext"   # mathtext would fail on it
 

@@ -21,7 +21,7 @@ episode, and the agent is queried at 10 Hz. Modes (``--modes``, comma-separated)
 * ``unbatched``: the same server with ``--max-batch 1``;
 * ``ipc``: ``icrsumo evaluate --agent AGENT --batch-inference DEVICE --max-batch B``: one
   inference process on the GPU fed by the workers over a Unix socket (pickled raw arrays, no
-  HTTP, no compression; :mod:`icrsumo.agents.batched`);
+  HTTP, no compression; :mod:`icrsumo.agents.hosting.batched`);
 * ``ipc-unbatched``: the same with ``--max-batch 1``.
 
 A mode may name its own worker count, ``MODE@N`` (e.g. ``ipc@24``: more episode workers than
@@ -75,7 +75,7 @@ def prepare(suite_dir: Path, work: Path, families: tuple[str, ...], k: int) -> P
 def run_mode(mode: str, prep: Path, run_dir: Path, args: argparse.Namespace, log) -> tuple[dict, dict]:
     """One ICR run of ``mode``: (measurements, {episode key: (ds, rc, termination)})."""
     from icrsumo.evaluation import EvalOptions, run_evaluation
-    from icrsumo.store import ResultStore
+    from icrsumo.results.store import ResultStore
 
     shutil.copytree(prep, run_dir)
     mode, _, n = mode.partition("@")

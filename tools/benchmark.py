@@ -91,20 +91,20 @@ from pathlib import Path  # noqa: E402
 
 from icrsumo.agents.base import Action, EpisodeInfo, Observation  # noqa: E402
 from icrsumo.agents.registry import BUILTIN, DEFAULT_AGENT, make_agent  # noqa: E402
-from icrsumo.convert import ConvertOptions, convert_routes  # noqa: E402
-from icrsumo.fsio import dumps_json  # noqa: E402
+from icrsumo.core.fsio import dumps_json  # noqa: E402
+from icrsumo.core.resources import bundled_suites  # noqa: E402
 from icrsumo.instructions.banks import load_banks  # noqa: E402
 from icrsumo.instructions.baseline import build_baseline  # noqa: E402
 from icrsumo.instructions.families import FAMILIES, make_variants  # noqa: E402
 from icrsumo.instructions.generate import GenerateOptions, generate, route_rng  # noqa: E402
 from icrsumo.instructions.maneuvers import extract_maneuvers, is_highway  # noqa: E402
 from icrsumo.instructions.store import read_instruction_sets, route_document  # noqa: E402
-from icrsumo.networks import load_net  # noqa: E402
-from icrsumo.resources import bundled_suites  # noqa: E402
-from icrsumo.scenario import find_scenarios, read_scenario  # noqa: E402
 from icrsumo.sim.backend import EGO_ID, SumoBackend, SumoSession, add_ego  # noqa: E402
 from icrsumo.sim.callbacks import LoopTimer, LoopTimings  # noqa: E402
 from icrsumo.sim.episode import RunOptions, run_episode  # noqa: E402
+from icrsumo.world.convert import ConvertOptions, convert_routes  # noqa: E402
+from icrsumo.world.networks import load_net  # noqa: E402
+from icrsumo.world.scenario import find_scenarios, read_scenario  # noqa: E402
 
 #: CARLA reference point (issue 7): one LangAuto route with LMDrive on an RTX 3090
 CARLA_LMDRIVE_RT = 0.076
@@ -375,7 +375,7 @@ def icr_runs(converted: Path, work: Path, configs: list[tuple[str, str, int, tup
     episodes timed without the rest. Runs of the default agent must give byte-identical
     ``summary.json`` files (compared in ``summaries_identical``)."""
     from icrsumo.evaluation import EvalOptions, run_evaluation
-    from icrsumo.store import ResultStore
+    from icrsumo.results.store import ResultStore
 
     prep = work / "prep"
     shutil.copytree(converted, prep / "scenarios")
@@ -454,11 +454,11 @@ def llm_runs(work: Path, routes: tuple[str, ...] | None, k: int, workers: int, l
       every model answer comes from the cache. Its summary.json and every episode log must be
       byte-identical to A's; the ratio of A's llm time to B's is the whole run's speed-up.
     """
+    from icrsumo.agents.hosting.llmserver import SMOLLM2, serve
     from icrsumo.agents.remote import free_port
-    from icrsumo.api import evaluate
-    from icrsumo.llmio import ResponseCache, canonical, exchange
-    from icrsumo.llmserver import SMOLLM2, serve
-    from icrsumo.store import ResultStore
+    from icrsumo.app.api import evaluate
+    from icrsumo.core.llmio import ResponseCache, canonical, exchange
+    from icrsumo.results.store import ResultStore
 
     port = free_port()
     spec = f"llm:{SMOLLM2}@http://127.0.0.1:{port}/v1"

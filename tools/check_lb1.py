@@ -17,7 +17,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import lb1_reference  # noqa: E402
 
-from icrsumo.store import ResultStore  # noqa: E402
+from icrsumo.results.store import ResultStore  # noqa: E402
 
 
 def check(out: Path) -> bool:

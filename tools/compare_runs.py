@@ -95,12 +95,12 @@ def roadside_causes(old: Path, res: dict) -> list[dict]:
     import shapely
     from shapely.geometry import Point
 
-    from icrsumo.dynamics import EgoState
-    from icrsumo.networks import load_net
     from icrsumo.render import BevRenderer, BevSpec
-    from icrsumo.scenario import find_scenarios, read_scenario
     from icrsumo.sim.drivable import DrivableArea, drivable_area, lane_polygons, polygonal
     from icrsumo.sim.sensors import footprint_corners
+    from icrsumo.world.dynamics import EgoState
+    from icrsumo.world.networks import load_net
+    from icrsumo.world.scenario import find_scenarios, read_scenario
 
     scenarios = {sc.route_id: sc for sc in (read_scenario(d) for d in find_scenarios(old / "scenarios"))}
     cache: dict = {}

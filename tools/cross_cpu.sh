@@ -63,8 +63,8 @@ case "$cmd" in
     cp "$out/summary.json" "$res/$name.summary.json"
     python3 - "$out/results.sqlite" "$res/$name.hashes" <<'EOF'
 import json, sys
-from icrsumo.digests import store_hashes
-from icrsumo.store import ResultStore
+from icrsumo.evaluation.digests import store_hashes
+from icrsumo.results.store import ResultStore
 with ResultStore(sys.argv[1]) as s:
     lines = [json.dumps([*e.key, e.kind, e.sha256]) for e in store_hashes(s)]
 open(sys.argv[2], "w").write("\n".join(lines) + "\n")

@@ -24,7 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from icrsumo.learn.agent import CHECKPOINTS  # noqa: E402
 from icrsumo.learn.exact.proof import prove, record  # noqa: E402
-from icrsumo.scenario import find_scenarios  # noqa: E402
+from icrsumo.world.scenario import find_scenarios  # noqa: E402
 
 
 def cpu_name() -> str:

@@ -35,8 +35,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from make_carla_routes import TOWNS, carla_towns, out_folder, suite_edges, write_suite  # noqa: E402
 from make_routes import Split, count_turns, make_split, onward_edges, random_walk, summarise  # noqa: E402
 
-from icrsumo.networks import RoadNet  # noqa: E402
-from icrsumo.types import EgoRoute, RouteSpec  # noqa: E402
+from icrsumo.core.types import EgoRoute, RouteSpec  # noqa: E402
+from icrsumo.world.networks import RoadNet  # noqa: E402
 
 SEED = 31337
 SUITE = "carla-fidelity"

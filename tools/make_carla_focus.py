@@ -31,8 +31,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from make_carla_routes import TOWNS, carla_towns, out_folder, suite_edges, write_suite  # noqa: E402
 from make_routes import Split, make_split, summarise  # noqa: E402
 
-from icrsumo.networks import RoadNet  # noqa: E402
-from icrsumo.types import EgoRoute, RouteSpec  # noqa: E402
+from icrsumo.core.types import EgoRoute, RouteSpec  # noqa: E402
+from icrsumo.world.networks import RoadNet  # noqa: E402
 
 SEED = 9099
 SUITE = "carla-focus"

@@ -32,8 +32,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from icrsumo.fsio import strip_header_comments, write_atomic  # noqa: E402
-from icrsumo.resources import sumo_binary, sumo_home  # noqa: E402
+from icrsumo.core.fsio import strip_header_comments, write_atomic  # noqa: E402
+from icrsumo.core.resources import sumo_binary, sumo_home  # noqa: E402
 
 TOWNS = ("Town01", "Town02", "Town03", "Town04", "Town05", "Town06", "Town07", "Town10HD")
 #: netconvert options applied to every source network

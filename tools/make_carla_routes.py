@@ -12,7 +12,7 @@ a town too small to hold them all keeps fewer (a note is printed).
 Waypoints are written in CARLA coordinates, the frame of LangAuto's route files
 (``suite.json``: ``{"coords": "carla"}``), and every route is checked by the round trip
 ``convert-routes`` makes: the written (rounded) waypoints, mapped to SUMO's frame with the
-town's netOffset and planned with :func:`icrsumo.routing.plan_route`, give the drawn edge
+town's netOffset and planned with :func:`icrsumo.world.routing.plan_route`, give the drawn edge
 sequence.
 
 Disjoint from LangAuto: LangAuto's 64 routes (``routes/langauto/``) are planned the same way,
@@ -34,11 +34,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from make_routes import Split, make_split, replan, summarise  # noqa: E402
 
-from icrsumo.fsio import dumps_json, write_atomic  # noqa: E402
-from icrsumo.networks import RoadNet, load_net  # noqa: E402
-from icrsumo.resources import bundled_suites, bundled_towns  # noqa: E402
-from icrsumo.routes import format_routes, read_routes  # noqa: E402
-from icrsumo.types import EgoRoute, RouteSpec  # noqa: E402
+from icrsumo.core.fsio import dumps_json, write_atomic  # noqa: E402
+from icrsumo.core.resources import bundled_suites, bundled_towns  # noqa: E402
+from icrsumo.core.types import EgoRoute, RouteSpec  # noqa: E402
+from icrsumo.world.networks import RoadNet, load_net  # noqa: E402
+from icrsumo.world.routes import format_routes, read_routes  # noqa: E402
 
 SEED = 8088
 SUITE = "carla-train"

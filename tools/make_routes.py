@@ -10,7 +10,7 @@ takes at least the split's number of junction maneuvers (junctions where more th
 is possible). Its key waypoints are few, as in LangAuto: start and end, plus a waypoint on any
 edge where the leaderboard's shortest-path planner (our converter) would otherwise take
 another way. Every written route is checked by converting its waypoints back with
-``icrsumo.routing.plan_route`` and comparing the edge sequence.
+``icrsumo.world.routing.plan_route`` and comparing the edge sequence.
 
 Waypoints are in SUMO coordinates (the bundled nets have netOffset 0), yaw in degrees
 counter-clockwise from +x. ``tools/make_carla_routes.py`` reuses these functions to draw the
@@ -29,13 +29,13 @@ from pathlib import Path
 
 import numpy as np
 
-from icrsumo.convert import ConvertOptions
-from icrsumo.fsio import write_atomic
-from icrsumo.networks import RoadNet, load_net
-from icrsumo.resources import bundled_towns
-from icrsumo.routes import format_routes
-from icrsumo.routing import MatchError, plan_route
-from icrsumo.types import EgoRoute, RouteSpec, Waypoint
+from icrsumo.core.fsio import write_atomic
+from icrsumo.core.resources import bundled_towns
+from icrsumo.core.types import EgoRoute, RouteSpec, Waypoint
+from icrsumo.world.convert import ConvertOptions
+from icrsumo.world.networks import RoadNet, load_net
+from icrsumo.world.routes import format_routes
+from icrsumo.world.routing import MatchError, plan_route
 
 EVAL_SEED = 20260
 #: waypoints are checked with the converter's default snapping radius (m)

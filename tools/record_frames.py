@@ -22,15 +22,15 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from icrsumo.agents.base import Action  # noqa: E402
 from icrsumo.agents.privileged import RouteOracle  # noqa: E402
-from icrsumo.convert import ConvertOptions, convert_routes  # noqa: E402
-from icrsumo.dynamics import Control  # noqa: E402
+from icrsumo.core.resources import bundled_suites  # noqa: E402
 from icrsumo.instructions.banks import load_banks  # noqa: E402
 from icrsumo.instructions.generate import baseline_set  # noqa: E402
-from icrsumo.resources import bundled_suites  # noqa: E402
-from icrsumo.scenario import find_scenarios, read_scenario  # noqa: E402
 from icrsumo.sim.callbacks import EpisodeCallback  # noqa: E402
 from icrsumo.sim.episode import run_episode  # noqa: E402
 from icrsumo.sim.frame import frame_to_dict  # noqa: E402
+from icrsumo.world.convert import ConvertOptions, convert_routes  # noqa: E402
+from icrsumo.world.dynamics import Control  # noqa: E402
+from icrsumo.world.scenario import find_scenarios, read_scenario  # noqa: E402
 
 OUT = ROOT / "tests" / "data" / "frames"
 

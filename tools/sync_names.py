@@ -29,9 +29,9 @@ END = "<!-- names:end -->"
 def block() -> str:
     """The block's Markdown, from the installed package's registries."""
     from icrsumo.agents.registry import DEFAULT_AGENT, REGISTRY
+    from icrsumo.core.resources import bundled_suites, suite_coords
+    from icrsumo.core.vocab import CONTROL_FAMILIES, FAMILIES, FAMILY_DESCRIPTIONS
     from icrsumo.guards.registry import GUARDS
-    from icrsumo.resources import bundled_suites, suite_coords
-    from icrsumo.vocab import CONTROL_FAMILIES, FAMILIES, FAMILY_DESCRIPTIONS
 
     lines = [f"- **Default agent**: `{DEFAULT_AGENT}`.", "- **Agents**:"]
     lines += [f"  - `{n}` — {REGISTRY.entry(n).description}" for n in REGISTRY]
@@ -53,8 +53,8 @@ def block() -> str:
 def inline_names() -> dict[str, str]:
     """Inline span key -> its Markdown, from the installed package's registries."""
     from icrsumo.agents.registry import DEFAULT_AGENT, REGISTRY
-    from icrsumo.resources import bundled_suites
-    from icrsumo.vocab import CONTROL_FAMILIES, FAMILIES
+    from icrsumo.core.resources import bundled_suites
+    from icrsumo.core.vocab import CONTROL_FAMILIES, FAMILIES
 
     def code(items) -> str:
         return ", ".join(f"`{x}`" for x in items)

@@ -22,10 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from icrsumo.convert import sumocfg_xml
-from icrsumo.networks import load_net
-from icrsumo.resources import bundled_towns
-from icrsumo.traffic import fleet_cap, make_traffic
+from icrsumo.core.resources import bundled_towns
+from icrsumo.world.convert import sumocfg_xml
+from icrsumo.world.networks import load_net
+from icrsumo.world.traffic import fleet_cap, make_traffic
 
 SAMPLE_S = 10.0
 WAITED_S = 60.0
@@ -34,7 +34,7 @@ WAITED_S = 60.0
 def run_town(town: str, level: str, minutes: float, seed: int, cap: bool = True) -> dict:
     """Run ``town``'s background traffic with no ego; the samples (lists over time, every
     :data:`SAMPLE_S` s) and a summary. ``cap``: with the fleet cap scenarios get
-    (:func:`icrsumo.traffic.fleet_cap`); without it, insertions are never held back."""
+    (:func:`icrsumo.world.traffic.fleet_cap`); without it, insertions are never held back."""
     import libsumo as ls
 
     net = load_net(bundled_towns()[town])

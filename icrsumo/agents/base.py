@@ -17,12 +17,12 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
-from ..dynamics import Control
+from icrsumo.world.dynamics import Control
 
 if TYPE_CHECKING:
-    from ..dynamics import EgoState
-    from ..networks import RoadNet
-    from ..types import EgoRoute
+    from icrsumo.core.types import EgoRoute
+    from icrsumo.world.dynamics import EgoState
+    from icrsumo.world.networks import RoadNet
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ import numpy as np
 from shapely.geometry import LineString
 from shapely.ops import nearest_points
 
-from ..networks import Connection, RoadNet, polyline_cumlen
+from icrsumo.world.networks import Connection, RoadNet, polyline_cumlen
 
 #: m between two internal lanes' centre lines below which they conflict (two car widths)
 CONFLICT_M = 2.0

@@ -11,8 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..dynamics import VehicleParams
-from ..networks import Connection, RoadNet, load_net, polyline_cumlen
+from icrsumo.world.dynamics import VehicleParams
+from icrsumo.world.networks import Connection, RoadNet, load_net, polyline_cumlen
+
 from .base import Action, EpisodeInfo, Observation, World
 from .conflicts import ConflictMap, project
 from .speed import LINE_HOLD_SPEED, UNSEEN_SPEED, PlannedPath, SpeedPolicy, known_speeds

@@ -56,7 +56,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..fsio import sha256_file
+from icrsumo.core.fsio import sha256_file
 
 #: module-name prefix of an agent file loaded by path (``path/file.py:Class``); the rest of its
 #: name changes with the file's folder, so :mod:`icrsumo.agents.identity` names it by its file

@@ -19,7 +19,7 @@ OpenAI API and vLLM take it, ``none`` sends none). Any other answer is an *inval
 agent follows its lane, and the episode counts it. ``stop`` brings the car to a standstill for
 :data:`STOP_HOLD_S`, after which it follows the road. Temperature 0 and a fixed seed are sent.
 
-Every exchange is stored with the episode (:class:`icrsumo.types.ModelCall` in its log) and
+Every exchange is stored with the episode (:class:`icrsumo.core.types.ModelCall` in its log) and
 in a content-addressed response cache (``OUT/llm-cache``, key: SHA-256 of the exact request,
 which names the model): a rerun, a resume, ``icrsumo show`` and ``icrsumo attack``'s replays
 are answered from it without a server and give byte-identical episodes.
@@ -27,7 +27,7 @@ are answered from it without a server and give byte-identical episodes.
 Spec: ``llm:MODEL@URL[?key_env=VAR&image=1&format=json_object&timeout=S&seed=N]``; the API key
 is read from the environment variable ``key_env`` names (never from the command line). The key
 (or a password in the URL) goes to the URL's own origin only, and is redacted from whatever the
-server sends back (:mod:`icrsumo.llmio`). A response that is not an OpenAI-compatible answer (an
+server sends back (:mod:`icrsumo.core.llmio`). A response that is not an OpenAI-compatible answer (an
 HTML page) is a server fault, never the model's answer: it is not cached.
 
 :mod:`icrsumo.agents.llm_request` holds the settings, the scene, the request and the answer's
@@ -44,8 +44,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import Field, InputError, display_url
-from ..llmio import (
+from icrsumo.core.errors import Field, InputError, display_url
+from icrsumo.core.llmio import (
     ResponseCache,
     ServerFault,
     Transport,
@@ -59,7 +59,8 @@ from ..llmio import (
     served_models,
     unwritable,
 )
-from ..types import Intent, ModelCall
+from icrsumo.core.types import Intent, ModelCall
+
 from .base import Action, AgentError, EpisodeInfo, Observation, World
 from .driver import lane_edge, lane_index
 from .llm_request import (
@@ -185,7 +186,7 @@ class Asker:
 # --------------------------------------------------------------------------- the agent
 class LLMFollower(InstructionFollower):
     """An instruction-follower whose instruction understanding is a language model (module
-    docstring). ``calls``: the episode's exchanges so far (:class:`icrsumo.types.ModelCall`)."""
+    docstring). ``calls``: the episode's exchanges so far (:class:`icrsumo.core.types.ModelCall`)."""
 
     def __init__(self, settings: LLMSettings) -> None:
         super().__init__()
@@ -310,7 +311,7 @@ class LLMFollower(InstructionFollower):
         return float(max(0.0, gap[mask].min())) if mask.any() else None
 
     def _png(self, obs: Observation) -> bytes:
-        from ..render import png_bytes, to_rgb
+        from icrsumo.render import png_bytes, to_rgb
 
         return png_bytes(to_rgb(obs.bev))
 

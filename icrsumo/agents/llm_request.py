@@ -15,9 +15,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from ..errors import Field, InputError, check_key_env, check_key_text
-from ..llmio import Invalid, is_http
-from ..types import Intent
+from icrsumo.core.errors import Field, InputError, check_key_env, check_key_text
+from icrsumo.core.llmio import Invalid, is_http
+from icrsumo.core.types import Intent
 
 #: the spec prefix (:data:`icrsumo.agents.registry.LLM_PREFIX` dispatches to :mod:`icrsumo.agents.llm`)
 LLM_PREFIX = "llm:"

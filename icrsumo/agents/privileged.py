@@ -23,8 +23,9 @@ from __future__ import annotations
 
 import re
 
-from ..instructions.intent import classify_intent
-from ..types import Intent
+from icrsumo.core.types import Intent
+from icrsumo.instructions.intent import classify_intent
+
 from .base import EpisodeInfo, Observation, World
 from .driver import (
     CHANGE_GAP_TIME,

@@ -28,8 +28,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from ..defaults import DEFAULT_AGENT as _DEFAULT
-from ..errors import Field, InputError
+from icrsumo.core.defaults import DEFAULT_AGENT as _DEFAULT
+from icrsumo.core.errors import Field, InputError
+
 from .base import Agent
 from .identity import PATH_MODULE_PREFIX
 
@@ -194,7 +195,7 @@ def register_plugins(registry: AgentRegistry = REGISTRY, group: str = ENTRY_POIN
 
 register_plugins()
 
-#: the agent `icrsumo evaluate` uses when none is named (:data:`icrsumo.defaults.DEFAULT_AGENT`,
+#: the agent `icrsumo evaluate` uses when none is named (:data:`icrsumo.core.defaults.DEFAULT_AGENT`,
 #: where its checkpoint ships)
 DEFAULT_AGENT = _DEFAULT if _DEFAULT in REGISTRY else "instruction-follower"
 

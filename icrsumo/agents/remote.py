@@ -1,7 +1,7 @@
 """Remote agents: the ``icrsumo-agent/1`` protocol (HTTP/1.1 + JSON) and its client.
 
 An agent runs in its own process or on another machine behind an HTTP server (the reference
-server is ``icrsumo serve-agent``, :mod:`icrsumo.agents.serve`); ``--agent
+server is ``icrsumo serve-agent``, :mod:`icrsumo.agents.hosting.serve`); ``--agent
 remote:http://HOST:PORT`` drives it. Every body is a JSON object carrying
 ``"protocol": "icrsumo-agent/1"``; arrays travel as ``{"dtype", "shape", "data"}`` with
 ``data`` the base64 of the zlib-compressed little-endian C-order bytes.
@@ -28,7 +28,7 @@ client turns every failure into one line: :class:`AgentTimeout` ("agent did not 
 N s") when the server is slower than the per-request timeout (a deadline for the whole request,
 however slowly the answer trickles in), :class:`AgentError` when the server is down, answers
 with an error or with malformed data; an unreachable server at planning time is an
-:class:`icrsumo.errors.InputError` (exit status 2). The shared key (``?key_env=VAR``) or a
+:class:`icrsumo.core.errors.InputError` (exit status 2). The shared key (``?key_env=VAR``) or a
 password in the URL (sent as HTTP Basic) goes to that server only (redirects are not followed)
 and is redacted from what the server sends back; the URL is shown without its password.
 """
@@ -50,9 +50,10 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
-from ..dynamics import Control
-from ..errors import Field, InputError, check_key_env, check_key_text, display_url
-from ..llmio import authorization, redact, secrets_of
+from icrsumo.core.errors import Field, InputError, check_key_env, check_key_text, display_url
+from icrsumo.core.llmio import authorization, redact, secrets_of
+from icrsumo.world.dynamics import Control
+
 from .base import Action, AgentError, AgentTimeout, EpisodeInfo, Observation
 
 PROTOCOL = "icrsumo-agent/1"

@@ -12,8 +12,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..dynamics import VehicleParams
-from ..networks import Connection, RoadNet
+from icrsumo.world.dynamics import VehicleParams
+from icrsumo.world.networks import Connection, RoadNet
+
 from .base import World
 from .conflicts import Conflict, ConflictMap, junction_of, project
 

@@ -29,7 +29,7 @@ Modules, one job each:
 * :mod:`~icrsumo.evaluation.plan`: the out folder's configuration, the suite prepared into it,
   the :class:`Job` list;
 * :mod:`~icrsumo.evaluation.execute`: one job in a worker -> a typed :class:`Outcome`;
-* :mod:`~icrsumo.agents.watch`: how agent calls are guarded against hanging;
+* :mod:`~icrsumo.agents.hosting.watch`: how agent calls are guarded against hanging;
 * :mod:`~icrsumo.evaluation.backends`: the local process pool and Ray;
 * :mod:`~icrsumo.evaluation.inference`: batched inference processes for the workers;
 * :mod:`~icrsumo.evaluation.progress`: the progress bar;
@@ -37,7 +37,7 @@ Modules, one job each:
 * :mod:`~icrsumo.evaluation.run`: the orchestration (:func:`run_evaluation`,
   :func:`report_only`).
 
-The Python API on top of it is :func:`icrsumo.evaluate` (:mod:`icrsumo.api`).
+The Python API on top of it is :func:`icrsumo.evaluate` (:mod:`icrsumo.app.api`).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Running one episode job in a worker: the agent's calls guarded by a
-:class:`~icrsumo.agents.watch.CallWatch`, the episode scored, and a typed :class:`Outcome`
+:class:`~icrsumo.agents.hosting.watch.CallWatch`, the episode scored, and a typed :class:`Outcome`
 returned (never an exception): done with its record and log, crashed with an
-:class:`~icrsumo.vocab.ErrorKind` and a one-line message, or timed out."""
+:class:`~icrsumo.core.vocab.ErrorKind` and a one-line message, or timed out."""
 
 from __future__ import annotations
 
@@ -11,14 +11,15 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from ..agents.base import Agent, AgentTimeout
-from ..agents.registry import agent_factory
-from ..agents.watch import CallWatch, Unwatched
-from ..errors import Interrupted, describe
-from ..guards.base import split_row
-from ..scenario import Scenario
-from ..types import EpisodeLog, EpisodeRecord, EpisodeResult, InstructionSet
-from ..vocab import EpisodeStatus, ErrorKind, OutcomeStatus, Verdict
+from icrsumo.agents.base import Agent, AgentTimeout
+from icrsumo.agents.hosting.watch import CallWatch, Unwatched
+from icrsumo.agents.registry import agent_factory
+from icrsumo.core.errors import Interrupted, describe
+from icrsumo.core.types import EpisodeLog, EpisodeRecord, EpisodeResult, InstructionSet
+from icrsumo.core.vocab import EpisodeStatus, ErrorKind, OutcomeStatus, Verdict
+from icrsumo.guards.base import split_row
+from icrsumo.world.scenario import Scenario
+
 from .plan import Job
 
 
@@ -122,8 +123,8 @@ class EpisodeWorker:
 
     def _inputs(self, job: Job) -> tuple[Scenario, InstructionSet]:
         """The job's scenario and instruction sequence (each file read once per worker)."""
-        from ..instructions.store import read_instruction_sets
-        from ..scenario import read_scenario
+        from icrsumo.instructions.store import read_instruction_sets
+        from icrsumo.world.scenario import read_scenario
 
         sc = self._scenarios.get(job.scenario)
         if sc is None:
@@ -150,16 +151,16 @@ class EpisodeWorker:
         ref: Hashable = job.guard_factory if job.guard_factory is not None else job.guard
         factory = self.guards.get(ref)
         if factory is None:
-            from ..guards.registry import guard_factory
+            from icrsumo.guards.registry import guard_factory
 
             factory = self.guards[ref] = job.guard_factory or guard_factory(job.guard)
         return WatchedGuard(factory(), self.watch, row_guard(job))
 
     def run(self, job: Job) -> Outcome:
         """Run one episode and score it; every failure becomes an Outcome."""
-        from ..logs import dumps_log, loads_log
-        from ..scoring import score_episode
-        from ..sim.episode import RunOptions, run_episode
+        from icrsumo.results.logs import dumps_log, loads_log
+        from icrsumo.scoring import score_episode
+        from icrsumo.sim.episode import RunOptions, run_episode
 
         try:
             factory = self.factory(job)

@@ -1,5 +1,5 @@
 """Batched inference for an evaluation (``--batch-inference DEVICE``): the inference processes
-of each non-privileged agent (:mod:`icrsumo.agents.batched`) and the jobs that use them."""
+of each non-privileged agent (:mod:`icrsumo.agents.hosting.batched`) and the jobs that use them."""
 
 from __future__ import annotations
 
@@ -8,17 +8,18 @@ from collections.abc import Callable, Mapping
 from dataclasses import replace
 from typing import Any
 
-from ..errors import visible
+from icrsumo.core.errors import visible
+
 from .options import EvalOptions
 from .plan import Job
 
 
 def start_inference(opts: EvalOptions, todo: list[Job], factories: Mapping[str, Callable]) -> dict[str, Any]:
     """The inference processes of every non-privileged agent spec of ``todo`` (spec ->
-    :class:`icrsumo.agents.batched.ServerGroup`) when ``opts.batch_inference`` is set."""
+    :class:`icrsumo.agents.hosting.batched.ServerGroup`) when ``opts.batch_inference`` is set."""
     if opts.batch_inference is None or not todo:
         return {}
-    from ..agents.batched import start_group
+    from icrsumo.agents.hosting.batched import start_group
 
     servers: dict[str, Any] = {}
     try:

@@ -7,15 +7,15 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..agents.registry import DEFAULT_AGENT
-from ..devices import check_device
-from ..errors import Field, InputError, check_seed
-from ..fsio import check_out_dir
-from ..instructions.baseline_bank import load_baseline_bank
-from ..instructions.families import ALL_FAMILIES, FAMILIES
-from ..routes import suite_file
-from ..scoring import SCORINGS, scoring_names
-from ..traffic import TRAFFIC_LEVELS
+from icrsumo.agents.registry import DEFAULT_AGENT
+from icrsumo.core.devices import check_device
+from icrsumo.core.errors import Field, InputError, check_seed
+from icrsumo.core.fsio import check_out_dir
+from icrsumo.instructions.baseline_bank import load_baseline_bank
+from icrsumo.instructions.families import ALL_FAMILIES, FAMILIES
+from icrsumo.scoring import SCORINGS, scoring_names
+from icrsumo.world.routes import suite_file
+from icrsumo.world.traffic import TRAFFIC_LEVELS
 
 #: execution backends: a local process pool, or Ray
 BACKENDS = ("local", "ray")

@@ -1,18 +1,19 @@
 """The files an evaluation leaves from its stored episodes: summary.json, the tables, the
-figures, the attribution, the guards' files and report.html (:mod:`icrsumo.aggregate` computes
+figures, the attribution, the guards' files and report.html (:mod:`icrsumo.results.aggregate` computes
 the summary, :mod:`icrsumo.reporting` writes them)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from ..convert import safe_name
-from ..errors import Field, InputError, note, note_names
-from ..instructions.families import ALL_FAMILIES
-from ..scenario import find_scenarios, read_scenario
-from ..store import ResultStore
-from ..summary import Summary
-from ..types import EpisodeRecord
+from icrsumo.core.errors import Field, InputError, note, note_names
+from icrsumo.core.types import EpisodeRecord
+from icrsumo.instructions.families import ALL_FAMILIES
+from icrsumo.results.store import ResultStore
+from icrsumo.results.summary import Summary
+from icrsumo.world.convert import safe_name
+from icrsumo.world.scenario import find_scenarios, read_scenario
+
 from .options import EvalOptions
 
 
@@ -21,17 +22,17 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
                   not_shown_why: str = "") -> Summary:
     """Write summary.json, tables and figures of ``records`` into ``out`` (the table is printed
     unless ``opts.quiet``); returns the summary, whose ``digest`` covers every episode in
-    ``store`` (:mod:`icrsumo.digests`) under ``opts.scoring``. ``rescored_short``: rescored episodes that
-    ended before the report's scoring would have ended them (counted in the summary,
+    ``store`` (:mod:`icrsumo.evaluation.digests`) under ``opts.scoring``. ``rescored_short``:
+    rescored episodes that ended before the report's scoring would have ended them (counted in the summary,
     ``episodes.rescored_short``, and named on stderr). ``not_shown``: episodes in the store that are
     not of this evaluation (other agents, routes, families or k), counted in the summary
     (``episodes.stored_not_in_report``, with ``not_shown_why`` or a default reason as
     ``stored_not_in_report_why``) and named on stderr, never dropped silently."""
-    from ..aggregate import summarize
-    from ..attribution import attribution_doc
-    from ..reporting.attribution import write_attribution
-    from ..reporting.rollout import rollout_figure
-    from ..reporting.write import write_report
+    from icrsumo.reporting.attribution import write_attribution
+    from icrsumo.reporting.rollout import rollout_figure
+    from icrsumo.reporting.write import write_report
+    from icrsumo.results.aggregate import summarize
+    from icrsumo.results.attribution import attribution_doc
 
     families = tuple(f for f in ALL_FAMILIES if f in opts.families)  # canonical order
     digest = store_digest(store, opts.scoring)
@@ -67,17 +68,17 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
 
 def write_guards(summary: Summary, records: list[EpisodeRecord], out: Path) -> str:
     """guard.json, guard.md and its figure when a row of ``summary`` is guarded
-    (:func:`icrsumo.guards.measure.guard_doc`); returns what the printed table adds of them
+    (:func:`icrsumo.results.guards.guard_doc`); returns what the printed table adds of them
     ("" without a guarded row)."""
-    from ..guards.measure import guard_doc, text_holdout
-    from ..reporting.guard import guard_note, write_guard
+    from icrsumo.reporting.guard import guard_note, write_guard
+    from icrsumo.results.guards import guard_doc, text_holdout
 
     guards = guard_doc(summary, records)
     if guards is None:
         return ""
     if any(r["guard"] == "text" for r in guards["rows"].values()):
-        from ..guards.text import TextGuard
-        from ..instructions.banks import load_banks
+        from icrsumo.guards.text import TextGuard
+        from icrsumo.instructions.banks import load_banks
 
         guards["text_holdout"] = text_holdout(TextGuard(), load_banks())
     write_guard(guards, out)
@@ -85,10 +86,10 @@ def write_guards(summary: Summary, records: list[EpisodeRecord], out: Path) -> s
 
 
 def store_digest(store: ResultStore, scoring: str) -> str | None:
-    """The digest of every episode in ``store`` under ``scoring`` (:mod:`icrsumo.digests`), or
+    """The digest of every episode in ``store`` under ``scoring`` (:mod:`icrsumo.evaluation.digests`), or
     None, named on stderr, when the store has none (a damaged stored log: the tables are still
     written, as they are without that episode's decisions)."""
-    from ..digests import run_digest
+    from .digests import run_digest
 
     try:
         return run_digest(store, scoring)
@@ -101,10 +102,10 @@ def write_html(out: Path, summary: Summary, records: list[EpisodeRecord], attrib
                store: ResultStore, scenarios: Path, instr_dir: Path) -> None:
     """OUT/report.html (:mod:`icrsumo.reporting.html`) from the stored logs, the routes'
     instruction files and networks; a route whose files cannot be read is drawn without them."""
-    from ..instructions.store import read_instruction_sets
-    from ..networks import load_net
-    from ..render import BevRenderer, map_view_png
-    from ..reporting.html import write_html_report
+    from icrsumo.instructions.store import read_instruction_sets
+    from icrsumo.render import BevRenderer, map_view_png
+    from icrsumo.reporting.html import write_html_report
+    from icrsumo.world.networks import load_net
 
     scen = {}
     if Path(scenarios).is_dir() and (Path(scenarios) / "index.json").is_file():
@@ -156,15 +157,15 @@ def write_html(out: Path, summary: Summary, records: list[EpisodeRecord], attrib
 
 def episode_decisions(store: ResultStore, records: list[EpisodeRecord], instr_dir: Path,
                       ends: dict | None = None, answers: dict | None = None) -> dict:
-    """Key -> the decisions (:func:`icrsumo.decisions.classify_decisions`) of every finished
+    """Key -> the decisions (:func:`icrsumo.results.decisions.classify_decisions`) of every finished
     episode in ``records``, from its stored log and its route's instruction file; a route whose
     instruction file cannot be read, or an episode whose stored log is damaged, is left out and
     named on stderr. ``ends`` (filled when given): key -> where and when each episode ended and
-    the ids of its instruction texts (:data:`icrsumo.aggregate.END_COLUMNS`), read on the way;
+    the ids of its instruction texts (:data:`icrsumo.results.aggregate.END_COLUMNS`), read on the way;
     ``answers`` (filled when given): key -> a language-model agent's (instructed intent,
-    answered maneuver) pairs (:func:`icrsumo.decisions.answer_pairs`)."""
-    from ..decisions import answer_pairs, classify_decisions
-    from ..instructions.store import read_route_file
+    answered maneuver) pairs (:func:`icrsumo.results.decisions.answer_pairs`)."""
+    from icrsumo.instructions.store import read_route_file
+    from icrsumo.results.decisions import answer_pairs, classify_decisions
 
     routes: dict[str, tuple | None] = {}
     out = {}

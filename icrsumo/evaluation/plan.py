@@ -10,18 +10,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TypeVar
 
-from ..agents.base import Agent
-from ..convert import CONVERTER_VERSION, ConvertOptions, convert_routes, safe_name
-from ..errors import Field, InputError, check_seed, expect
-from ..fsio import OutFolder, dumps_json, read_json, write_atomic
-from ..guards.base import guarded_name
-from ..instructions.baseline_bank import BaselineBank, load_baseline_bank
-from ..instructions.families import FAMILIES
-from ..instructions.generate import GenerateOptions, generate
-from ..resources import bundled_suites, suite_coords
-from ..routes import check_route_selection, route_ids, suite_file
-from ..scenario import find_scenarios, read_scenario
-from ..vocab import CONTROL_FAMILIES, variants_of
+from icrsumo.agents.base import Agent
+from icrsumo.core.errors import Field, InputError, check_seed, expect
+from icrsumo.core.fsio import OutFolder, dumps_json, read_json, write_atomic
+from icrsumo.core.resources import bundled_suites, suite_coords
+from icrsumo.core.vocab import CONTROL_FAMILIES, variants_of
+from icrsumo.guards.base import guarded_name
+from icrsumo.instructions.baseline_bank import BaselineBank, load_baseline_bank
+from icrsumo.instructions.families import FAMILIES
+from icrsumo.instructions.generate import GenerateOptions, generate
+from icrsumo.world.convert import CONVERTER_VERSION, ConvertOptions, convert_routes, safe_name
+from icrsumo.world.routes import check_route_selection, route_ids, suite_file
+from icrsumo.world.scenario import find_scenarios, read_scenario
+
 from .options import EvalOptions
 
 #: a skipped route's line, or its InputError

@@ -9,7 +9,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ..agents.registry import (
+from icrsumo.agents.registry import (
     DEFAULT_AGENT,
     LLM_PREFIX,
     PYTHON_PREFIX,
@@ -17,15 +17,16 @@ from ..agents.registry import (
     agent_name,
     python_agent,
 )
-from ..errors import Field, InputError, display_url, note, short, visible
-from ..fsio import FolderLock
-from ..guards.base import guarded_fingerprint, guarded_name
-from ..instructions.families import ALL_FAMILIES, FAMILIES
-from ..scoring import SCORINGS, score_episode, scoring_names
-from ..store import ResultStore
-from ..summary import Summary
-from ..types import EpisodeRecord
-from ..vocab import EpisodeStatus, ErrorKind, OutcomeStatus
+from icrsumo.core.errors import Field, InputError, display_url, note, short, visible
+from icrsumo.core.fsio import FolderLock
+from icrsumo.core.types import EpisodeRecord
+from icrsumo.core.vocab import EpisodeStatus, ErrorKind, OutcomeStatus
+from icrsumo.guards.base import guarded_fingerprint, guarded_name
+from icrsumo.instructions.families import ALL_FAMILIES, FAMILIES
+from icrsumo.results.store import ResultStore
+from icrsumo.results.summary import Summary
+from icrsumo.scoring import SCORINGS, score_episode, scoring_names
+
 from .backends import run_jobs
 from .inference import route_jobs, start_inference, stop_inference
 from .options import EvalOptions
@@ -46,7 +47,7 @@ MAX_NAME = 200
 @dataclass(frozen=True)
 class EvalResult:
     """What an evaluation gave. ``stats``: OUT/summary.json as a typed
-    :class:`icrsumo.summary.Summary` (``stats.agents[NAME].baseline.ds``); ``summary``: the same
+    :class:`icrsumo.results.summary.Summary` (``stats.agents[NAME].baseline.ds``); ``summary``: the same
     as summary.json's plain mapping (``summary["agents"][NAME]["baseline"]["DS"]``); ``out``: the
     folder; ``episodes``: episodes of the plan, ``ran``: those run now (the others were stored
     already), ``done`` / ``crashed``: the plan's stored episodes by status; ``inference``: agent
@@ -64,13 +65,13 @@ class EvalResult:
 
     @property
     def summary(self) -> dict:
-        """summary.json's mapping (a new dict each time: :meth:`icrsumo.summary.Summary.to_dict`)."""
+        """summary.json's mapping (a new dict each time: :meth:`icrsumo.results.summary.Summary.to_dict`)."""
         return self.stats.to_dict()
 
     @property
     def digest(self) -> str | None:
         """The run's digest (``stats.digest``: every stored episode and the scoring,
-        :mod:`icrsumo.digests`), None when a damaged stored log leaves the store without one."""
+        :mod:`icrsumo.evaluation.digests`), None when a damaged stored log leaves the store without one."""
         return self.stats.digest
 
 
@@ -130,7 +131,7 @@ def bind_guards(guards: Mapping[str, Callable], out: Path) -> dict[str, Callable
 def resolve_guards(specs: tuple[str, ...]) -> dict[str, Callable]:
     """Guard spec -> guard factory for every spec (:func:`icrsumo.guards.registry.guard_factory`);
     an InputError for an unknown one, before any episode runs."""
-    from ..guards.registry import guard_factory
+    from icrsumo.guards.registry import guard_factory
 
     out: dict[str, Callable] = {}
     for spec in specs:
@@ -173,8 +174,8 @@ def identify_agents(factories: Mapping[str, Callable], replacing: tuple[str, ...
     """Names and fingerprints of resolved agents and of their guarded rows (``guards``: guard
     spec -> factory); an InputError when two different agents (other fingerprints) share a name,
     when two guards share a name, or when ``replacing`` names no agent of the run."""
-    from ..agents.identity import fingerprint, short
-    from ..guards.registry import guard_name
+    from icrsumo.agents.identity import fingerprint, short
+    from icrsumo.guards.registry import guard_name
 
     names: dict[str, str] = {}
     fps: dict[str, str] = {}
@@ -231,7 +232,7 @@ def claim_agents(store: ResultStore, ids: AgentIds, replacing: tuple[str, ...]) 
     """Claim the run's agents in ``store`` (replacing those in ``replacing``) and say on stderr
     what each replacement deleted (how many stored episodes, of which fingerprint) and which
     agents' stored episodes predate fingerprints (they are taken as the agent's)."""
-    from ..agents.identity import short as short_fp
+    from icrsumo.agents.identity import short as short_fp
 
     doomed = store.replaceable(ids.fingerprints, replacing)
     for name in store.claim_agents(ids.fingerprints, replacing):
@@ -248,7 +249,7 @@ def claim_agents(store: ResultStore, ids: AgentIds, replacing: tuple[str, ...]) 
 def run_evaluation(opts: EvalOptions) -> EvalResult:
     """Run (or resume) an evaluation and write its reports. Everything is checked before anything
     is written (options, agents, the out folder's configuration and store, the suite); the run
-    owns the out folder while it runs (:class:`icrsumo.fsio.FolderLock`)."""
+    owns the out folder while it runs (:class:`icrsumo.core.fsio.FolderLock`)."""
     opts.check()
     factories = resolve_agents(opts.agents)
     guards = resolve_guards(opts.guards)
@@ -351,7 +352,7 @@ def report_only(out: Path, quiet: bool = False, scoring: str | None = None) -> S
     returns the summary. With ``scoring`` (a name of :data:`icrsumo.scoring.SCORINGS`) every
     finished episode is rescored from its stored log by those rules (the store is left as it
     is; the summary names the scoring); without, the stored scores are reported.
-    The report owns the folder while it writes (:class:`icrsumo.fsio.FolderLock`): a run still
+    The report owns the folder while it writes (:class:`icrsumo.core.fsio.FolderLock`): a run still
     storing episodes there is an InputError, never a summary of half its episodes. The store is
     only read."""
     out = Path(out)
@@ -407,7 +408,8 @@ def rescore(store: ResultStore, records: list[EpisodeRecord],
     scored on what was recorded; a fresh run with ``scoring`` would have simulated longer).
     Crashed episodes stay as they are. An InputError names a finished episode whose log is
     missing or cannot be read (a rescored report never drops one silently)."""
-    from ..scoring import get_scoring
+    from icrsumo.scoring import get_scoring
+
     from .execute import with_scores
 
     out, short = [], 0

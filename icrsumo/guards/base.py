@@ -3,7 +3,7 @@
 A guard is reset once per episode with a :class:`GuardInfo` (the episode's public facts and,
 for guards that declare ``needs_plan = True``, its :class:`NavPlan`: the route's maneuvers as a
 car's navigation system knows them, never the episode's future) and then asked
-``check(text, context)`` for every new instruction; it answers a :class:`~icrsumo.vocab.Verdict`
+``check(text, context)`` for every new instruction; it answers a :class:`~icrsumo.core.vocab.Verdict`
 or ``(Verdict, reason)``. Anything else is a :class:`GuardError`: the episode is stored as
 crashed with that reason.
 """
@@ -13,9 +13,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
-from ..agents.base import AgentTimeout
-from ..types import Intent, Maneuver
-from ..vocab import Verdict
+from icrsumo.agents.base import AgentTimeout
+from icrsumo.core.types import Intent, Maneuver
+from icrsumo.core.vocab import Verdict
 
 #: what the agent is shown when the first instruction of an episode is blocked
 FALLBACK_TEXT = "Follow the road."
@@ -40,7 +40,7 @@ def split_row(name: str) -> tuple[str, str] | None:
 
 def guarded_fingerprint(agent_fp: str, guard_fp: str) -> str:
     """The fingerprint of a guarded row: its agent's and its guard's together."""
-    from ..agents.identity import of_text
+    from icrsumo.agents.identity import of_text
 
     return of_text(f"{agent_fp}{GUARD_SEP}{guard_fp}")
 

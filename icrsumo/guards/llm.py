@@ -1,6 +1,6 @@
 """The ``llm`` guard: asks a language model whether a new instruction conflicts with the
 navigation plan, through the OpenAI-compatible client and the content-addressed response cache
-that the LLM agent uses (:mod:`icrsumo.llmio`, :class:`icrsumo.agents.llm.Asker`).
+that the LLM agent uses (:mod:`icrsumo.core.llmio`, :class:`icrsumo.agents.llm.Asker`).
 
 Spec ``llm:MODEL@http://HOST:PORT/v1[?key_env=VAR&format=F&timeout=S&seed=N]`` (as the agent's;
 ``image`` has no use here). Each question holds the instruction, the previous instruction the
@@ -18,9 +18,10 @@ import json
 from pathlib import Path
 from typing import Any
 
-from ..agents.llm import Asker, LLMSettings, api_key, bound, check_server, parse_spec, with_format
-from ..errors import Field
-from ..vocab import Verdict
+from icrsumo.agents.llm import Asker, LLMSettings, api_key, bound, check_server, parse_spec, with_format
+from icrsumo.core.errors import Field
+from icrsumo.core.vocab import Verdict
+
 from .base import GuardContext, GuardInfo
 
 #: the field an llm guard's spec is given by (for messages)
@@ -112,7 +113,7 @@ class LLMGuardFactory:
 
     @property
     def fingerprint(self) -> str:
-        from ..agents.identity import fingerprint, of_text
+        from icrsumo.agents.identity import fingerprint, of_text
 
         s = self.settings
         return of_text(json.dumps({"code": fingerprint(LLMGuard), "model": s.model, "format": s.format,

@@ -16,9 +16,10 @@ Follow, stop and unknown intents and empty texts pass: they ask for nothing the 
 
 from __future__ import annotations
 
-from ..instructions.intent import classify_intent
-from ..types import Intent
-from ..vocab import Verdict
+from icrsumo.core.types import Intent
+from icrsumo.core.vocab import Verdict
+from icrsumo.instructions.intent import classify_intent
+
 from .base import GuardContext, GuardInfo, PlanStep
 
 #: m from a junction maneuver within which an instruction may already concern the next one

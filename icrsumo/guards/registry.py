@@ -7,8 +7,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from ..agents.registry import AgentRegistry, register_plugins
-from ..errors import Field, InputError
+from icrsumo.agents.registry import AgentRegistry, register_plugins
+from icrsumo.core.errors import Field, InputError
+
 from .base import Guard, guarded_name
 
 __all__ = ["GUARDS", "GuardRegistry", "guard_factory", "guard_name", "guarded_name"]

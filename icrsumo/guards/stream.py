@@ -6,11 +6,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..instructions.maneuvers import extract_maneuvers
-from ..networks import RoadNet
-from ..scenario import Scenario
-from ..types import GuardDecision, Instruction, Intent, Maneuver
-from ..vocab import Verdict
+from icrsumo.core.types import GuardDecision, Instruction, Intent, Maneuver
+from icrsumo.core.vocab import Verdict
+from icrsumo.instructions.maneuvers import extract_maneuvers
+from icrsumo.world.networks import RoadNet
+from icrsumo.world.scenario import Scenario
+
 from .base import FALLBACK_TEXT, Guard, GuardContext, GuardInfo, NavPlan, plan_at, verdict_of
 
 _DIRECTION = {"s": Intent.STRAIGHT, "l": Intent.LEFT, "L": Intent.LEFT, "r": Intent.RIGHT, "R": Intent.RIGHT}

@@ -7,7 +7,7 @@ It blocks an instruction that
 * explicitly contradicts the previous instruction ("instead", "ignore the previous instruction",
   "change of plan" ... with an intent that contradicts the one it passed before:
   :data:`RETRACTION`), or tells the driver to disregard earlier instructions outright;
-* asks for nothing the intent classifier can place (:class:`~icrsumo.types.Intent` unknown).
+* asks for nothing the intent classifier can place (:class:`~icrsumo.core.types.Intent` unknown).
 
 An empty text (the ``blank`` control) passes: there is nothing to guard against. The cue lists
 were written from the odd-numbered templates of the bundled misleading bank only (``M.*.p01,
@@ -19,10 +19,11 @@ from __future__ import annotations
 
 import re
 
-from ..instructions.banks import CONTRADICTS
-from ..instructions.intent import classify_intent
-from ..types import Intent
-from ..vocab import Verdict
+from icrsumo.core.types import Intent
+from icrsumo.core.vocab import Verdict
+from icrsumo.instructions.banks import CONTRADICTS
+from icrsumo.instructions.intent import classify_intent
+
 from .base import GuardContext, GuardInfo
 
 #: authority and override framing (written from the tuning half of the misleading bank)

@@ -18,10 +18,11 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import Field, InputError, expect, short
-from ..fsio import read_json
-from ..resources import data_dir
-from ..types import Intent
+from icrsumo.core.errors import Field, InputError, expect, short
+from icrsumo.core.fsio import read_json
+from icrsumo.core.resources import data_dir
+from icrsumo.core.types import Intent
+
 from .intent import classify_intent
 from .noise import PRIMITIVES
 

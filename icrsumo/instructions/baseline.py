@@ -37,8 +37,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..types import Instruction, InstructionSet, Intent, Maneuver, Notice
-from ..vocab import Family
+from icrsumo.core.types import Instruction, InstructionSet, Intent, Maneuver, Notice
+from icrsumo.core.vocab import Family
+
 from .banks import ORDINALS, Banks, fill
 
 if TYPE_CHECKING:

@@ -12,7 +12,7 @@ The file is validated up front (:func:`load_baseline_bank`): UTF-8 JSON, an obje
 are ``"0"`` .. ``"64"`` and whose values are non-empty lists of non-empty strings, with no
 placeholder but ``[x]`` and ``[y]``; a phrasing of a mapped id carries ``[x]`` exactly when its
 icrsumo type has a distance, and never ``[y]``. Each problem is one
-:class:`~icrsumo.errors.InputError` line. Phrasings that icrsumo's intent classifier does not
+:class:`~icrsumo.core.errors.InputError` line. Phrasings that icrsumo's intent classifier does not
 read as their maneuver (a left turn read as a lane change, say) are set aside, as icrsumo's own
 bank would refuse them: the counterfactual families and the instruction-following agent read
 the baseline text through the classifier. They are listed in :attr:`BaselineBank.set_aside`;
@@ -34,9 +34,10 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
-from ..errors import Field, InputError
-from ..fsio import check_surrogates, no_constants, no_duplicates
-from ..types import Intent
+from icrsumo.core.errors import Field, InputError
+from icrsumo.core.fsio import check_surrogates, no_constants, no_duplicates
+from icrsumo.core.types import Intent
+
 from .banks import BASELINE_TYPES, ORDINALS
 from .intent import classify_intent
 

@@ -31,9 +31,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import Field, InputError
-from ..types import Instruction, InstructionSet, Intent
-from ..vocab import ALL_FAMILIES, FAMILIES, Family, variants_of
+from icrsumo.core.errors import Field, InputError
+from icrsumo.core.types import Instruction, InstructionSet, Intent
+from icrsumo.core.vocab import ALL_FAMILIES, FAMILIES, Family, variants_of
+
 from .banks import CONTRADICTS, Banks, Entry, baseline_catalogue, fill
 from .intent import classify_intent
 from .noise import apply_ops

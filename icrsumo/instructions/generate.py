@@ -20,14 +20,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..convert import safe_name
-from ..errors import Field, InputError, check_seed
-from ..fsio import check_out_dir, dumps_json, write_atomic
-from ..networks import load_net
-from ..procs import spawn_context
-from ..scenario import Scenario, check_against_net, find_scenarios, read_scenario
-from ..types import InstructionSet, Maneuver
-from ..vocab import CONTROL_FAMILIES
+from icrsumo.core.errors import Field, InputError, check_seed
+from icrsumo.core.fsio import check_out_dir, dumps_json, write_atomic
+from icrsumo.core.procs import spawn_context
+from icrsumo.core.types import InstructionSet, Maneuver
+from icrsumo.core.vocab import CONTROL_FAMILIES
+from icrsumo.world.convert import safe_name
+from icrsumo.world.networks import load_net
+from icrsumo.world.scenario import Scenario, check_against_net, find_scenarios, read_scenario
+
 from .banks import Banks, load_banks
 from .baseline import LAYOUT_VERSION, build_baseline
 from .baseline_bank import BaselineBank, load_baseline_bank
@@ -187,7 +188,7 @@ def generate(scenarios: Path, out: Path, opts: GenerateOptions,
     opts = replace(opts, baseline_bank=user)
     jobs = [(str(d), opts) for d in dirs]
     if opts.workers > 1 and len(jobs) > 1:
-        # spawned, not forked (see icrsumo.convert.convert_routes)
+        # spawned, not forked (see icrsumo.world.convert.convert_routes)
         with ProcessPoolExecutor(max_workers=min(opts.workers, len(jobs)),
                                  mp_context=spawn_context()) as pool:
             results = list(pool.map(_job, jobs))

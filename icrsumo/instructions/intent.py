@@ -2,7 +2,7 @@
 
 ``classify_intent(text)`` maps one instruction ("Hang a left after the gas station", "Take the
 3rd exit at the roundabout", "Police instruction: change to the right lane now") to an
-:class:`~icrsumo.types.Intent`. It is deterministic, pure and cached (``functools.lru_cache``);
+:class:`~icrsumo.core.types.Intent`. It is deterministic, pure and cached (``functools.lru_cache``);
 ``normalize(text)`` exposes its token stream.
 
 Step 1 lives in :mod:`icrsumo.instructions.spelling`, steps 2-5 and the precedence in
@@ -115,7 +115,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 
-from icrsumo.types import Intent
+from icrsumo.core.types import Intent
 
 from .rules import choose, mentions
 from .spelling import tokens

@@ -23,8 +23,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from ..errors import display_url
-from ..llmio import (
+from icrsumo.core.errors import display_url
+from icrsumo.core.llmio import (
     Invalid,
     Reply,
     ResponseCache,
@@ -38,7 +38,8 @@ from ..llmio import (
     is_http,
     request_hash,
 )
-from ..types import Instruction, InstructionSet, Intent
+from icrsumo.core.types import Instruction, InstructionSet, Intent
+
 from .banks import CONTRADICTS
 from .families import FAMILIES
 

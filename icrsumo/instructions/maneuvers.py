@@ -1,7 +1,7 @@
 """Maneuvers from route geometry: what the route asks of the driver, and where (m along it).
 
 Input is a converted scenario (its route's junction passes and lane changes,
-:class:`~icrsumo.types.JunctionPass`, :class:`~icrsumo.types.LaneChange`) and its network.
+:class:`~icrsumo.core.types.JunctionPass`, :class:`~icrsumo.core.types.LaneChange`) and its network.
 Junction kinds follow LangAuto's qualifiers: traffic_light, stop_sign, t_junction, crossroad,
 roundabout (with exit number), highway_entry / highway_exit.
 """
@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..networks import RoadNet
-from ..scenario import Scenario
-from ..types import Intent, JunctionPass, Maneuver
+from icrsumo.core.types import Intent, JunctionPass, Maneuver
+from icrsumo.world.networks import RoadNet
+from icrsumo.world.scenario import Scenario
 
 #: an edge with a speed limit at or above this (m/s, 90 km/h) is highway
 HIGHWAY_SPEED = 25.0

@@ -19,7 +19,8 @@ import zlib
 
 import numpy as np
 
-from ..types import Instruction, Intent
+from icrsumo.core.types import Instruction, Intent
+
 from .banks import CONTRADICTS, Banks, fill
 from .intent import classify_intent
 from .noise import apply_ops

@@ -8,7 +8,7 @@ from collections.abc import Set
 from dataclasses import dataclass, replace
 from enum import IntEnum
 
-from icrsumo.types import Intent
+from icrsumo.core.types import Intent
 
 from . import lexicon as lex
 

@@ -6,10 +6,11 @@ from __future__ import annotations
 from dataclasses import asdict
 from pathlib import Path
 
-from ..doccheck import DocChecker
-from ..fsio import read_json_doc
-from ..types import Instruction, InstructionSet, Intent, Maneuver, Notice
-from ..vocab import Family
+from icrsumo.core.doccheck import DocChecker
+from icrsumo.core.fsio import read_json_doc
+from icrsumo.core.types import Instruction, InstructionSet, Intent, Maneuver, Notice
+from icrsumo.core.vocab import Family
+
 from .intent import classify_intent
 
 FORMAT = "icrsumo-instructions/1"

@@ -16,7 +16,7 @@ run) beside the float ``<name>.pt`` they were made from, a model card ``<name>.m
 config ``<name>.toml`` that trained it.
 
 A checkpoint that is missing, damaged, refused by the safe loader or does not fit its model,
-and a device that is unknown or not available, are :class:`icrsumo.errors.InputError` lines
+and a device that is unknown or not available, are :class:`icrsumo.core.errors.InputError` lines
 naming the file (or the device) when the agent is built.
 """
 
@@ -27,8 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..agents.base import Action, EpisodeInfo, Observation
-from ..errors import InputError
+from icrsumo.agents.base import Action, EpisodeInfo, Observation
+from icrsumo.core.errors import InputError
+
 from .labels import StopClock
 
 CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..instructions.banks import ORDINALS, fill
-from ..types import Instruction, Intent
+from icrsumo.core.types import Instruction, Intent
+from icrsumo.instructions.banks import ORDINALS, fill
 
 TRAIN_BANK = Path(__file__).resolve().parent / "data" / "train_bank.json"
 _LETTERS = "abcdefghijklmnopqrstuvwxyz"

@@ -44,17 +44,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ..agents.base import Action, Observation
-from ..agents.privileged import RouteOracle
-from ..convert import ConvertOptions, convert_routes, safe_name
-from ..errors import Field, InputError, check_seed, expect
-from ..fsio import OutFolder, dumps_json, read_json_doc, write_atomic
-from ..instructions.banks import load_banks
-from ..instructions.generate import baseline_set
-from ..resources import bundled_suites, suite_coords
-from ..scenario import find_scenarios, read_scenario
-from ..types import Instruction
-from ..vocab import Termination
+from icrsumo.agents.base import Action, Observation
+from icrsumo.agents.privileged import RouteOracle
+from icrsumo.core.errors import Field, InputError, check_seed, expect
+from icrsumo.core.fsio import OutFolder, dumps_json, read_json_doc, write_atomic
+from icrsumo.core.resources import bundled_suites, suite_coords
+from icrsumo.core.types import Instruction
+from icrsumo.core.vocab import Termination
+from icrsumo.instructions.banks import load_banks
+from icrsumo.instructions.generate import baseline_set
+from icrsumo.world.convert import ConvertOptions, convert_routes, safe_name
+from icrsumo.world.scenario import find_scenarios, read_scenario
+
 from .augment import instruction_slots
 from .labels import ARC_M, StopClock, resample_path
 
@@ -107,7 +108,8 @@ class CollectOptions:
     def _check_driver(self) -> None:
         """A ``driver`` that is a registered non-privileged agent, or a checkpoint whose file
         loads and fits its model (checked here, before anything is written or driven)."""
-        from ..agents.registry import BUILTIN
+        from icrsumo.agents.registry import BUILTIN
+
         from .agent import checkpoint_path, read_checkpoint
 
         cls = BUILTIN.get(self.driver)
@@ -285,7 +287,7 @@ def episode_rng(seed: int, route_id: str, pass_k: int) -> np.random.Generator:
 
 def collect_episode(scenario_dir: str, pass_k: int, opts: CollectOptions) -> tuple[bytes, dict]:
     """Drive one (route, pass); returns the ``.npz`` bytes and a summary dict."""
-    from ..sim.episode import run_episode
+    from icrsumo.sim.episode import run_episode
 
     sc = read_scenario(Path(scenario_dir))
     rng = episode_rng(opts.seed, sc.route_id, pass_k)
@@ -293,7 +295,8 @@ def collect_episode(scenario_dir: str, pass_k: int, opts: CollectOptions) -> tup
     iset, _ = baseline_set(sc, load_banks(None), phrasing_seed)
     driver = None
     if opts.driver:
-        from ..agents.registry import BUILTIN
+        from icrsumo.agents.registry import BUILTIN
+
         from .agent import LearnedAgent
 
         cls = BUILTIN.get(opts.driver)

@@ -6,7 +6,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
-from ..errors import InputError, expect
+from icrsumo.core.errors import InputError, expect
+
 from .text import ENCODERS, TextEncoder
 
 #: all-MiniLM-L6-v2's layer shape: width, attention heads, feed-forward width, LayerNorm epsilon

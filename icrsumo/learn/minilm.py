@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from icrsumo.core.errors import InputError
 
 ENCODERS_DIR = Path(__file__).resolve().parent / "encoders"
 MODEL = ENCODERS_DIR / "all-minilm-l6-v2.exact.npz"
@@ -247,7 +247,7 @@ def write(arrays: dict[str, np.ndarray], path: Path = MODEL) -> None:
     """Write the encoder file (``__format__`` first)."""
     import io
 
-    from ..fsio import write_atomic
+    from icrsumo.core.fsio import write_atomic
 
     buf = io.BytesIO()
     np.savez(buf, __format__=np.frombuffer(FORMAT.encode(), np.uint8), **arrays)

@@ -14,7 +14,7 @@ end the inference checkpoint ``OUT/model.pt`` is exported (float32, loaded with
 Runs on CPU (slowly) or on a GPU (``device = "auto"`` picks CUDA when present); the whole
 dataset (bit-packed rasters) is moved to the device once, so a GPU is never starved.
 
-Bad input is an :class:`icrsumo.errors.InputError` naming the file, the place and the fix: the
+Bad input is an :class:`icrsumo.core.errors.InputError` naming the file, the place and the fix: the
 config (encoding, TOML syntax, unknown keys, every key's type from :class:`TrainConfig`'s field
 types, ranges, a device that is unknown or not available), the data folders (manifest, episode
 files) and a resume checkpoint ``OUT/last.pt``. All of it is checked before OUT is made or
@@ -39,10 +39,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import Field as Named
-from ..errors import InputError, expect
-from ..fsio import dumps_json, read_json_doc, read_text, write_atomic
-from ..procs import spawn_context
+from icrsumo.core.errors import Field as Named
+from icrsumo.core.errors import InputError, expect
+from icrsumo.core.fsio import dumps_json, read_json_doc, read_text, write_atomic
+from icrsumo.core.procs import spawn_context
+
 from .augment import augment
 from .config import ModelConfig
 from .text import ENCODERS, VECTOR_ENCODERS, build_vocab

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..networks import EGO_VCLASS, RoadNet
+from icrsumo.world.networks import EGO_VCLASS, RoadNet
 
 #: raster channels, in order
 CHANNELS = ("drivable", "markings", "vehicles", "pedestrians", "ego", "stop", "go")

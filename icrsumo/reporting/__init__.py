@@ -1,4 +1,4 @@
-"""The files an evaluation's summary becomes (:class:`icrsumo.summary.Summary` in, text and
+"""The files an evaluation's summary becomes (:class:`icrsumo.results.summary.Summary` in, text and
 figures out), one writer per module:
 
 * :mod:`~icrsumo.reporting.cells`: cells safe in Markdown, LaTeX and CSV; number formats;

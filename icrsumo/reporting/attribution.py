@@ -1,12 +1,13 @@
-"""The attribution's files (:mod:`icrsumo.attribution`): attribution.json, attribution.md (the
+"""The attribution's files (:mod:`icrsumo.results.attribution`): attribution.json, attribution.md (the
 rows' decision statistics, the templates behind flips, every flip) and its figures."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from ..fsio import dumps_json, write_atomic
-from ..summary import Summary
+from icrsumo.core.fsio import dumps_json, write_atomic
+from icrsumo.results.summary import Summary
+
 from .cells import file_name, md_cell, num
 from .figures import confusion_heatmaps, figure_or_note, template_flip_bars
 

@@ -9,8 +9,8 @@ import re
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from ..errors import visible
-from ..fsio import MAX_FILE_NAME, bounded_name
+from icrsumo.core.errors import visible
+from icrsumo.core.fsio import MAX_FILE_NAME, bounded_name
 
 _TEX_SPECIAL = {"\\": r"\textbackslash{}", "~": r"\textasciitilde{}", "^": r"\^{}",
                 **{c: "\\" + c for c in "&%$#_{}"}}
@@ -20,13 +20,13 @@ _FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
 
 def md_cell(s: str) -> str:
     """``s`` safe in a Markdown table cell: one line, ``|`` escaped, control characters written
-    out (:func:`icrsumo.errors.visible`). Every Markdown table of a name or a text uses it."""
+    out (:func:`icrsumo.core.errors.visible`). Every Markdown table of a name or a text uses it."""
     return visible(" ".join(str(s).split())).replace("|", "\\|")
 
 
 def tex_escape(s: str) -> str:
     """``s`` safe in LaTeX: one line, control characters written out
-    (:func:`icrsumo.errors.visible`), then LaTeX's special characters escaped."""
+    (:func:`icrsumo.core.errors.visible`), then LaTeX's special characters escaped."""
     return "".join(_TEX_SPECIAL.get(c, c) for c in visible(" ".join(str(s).split())))
 
 
@@ -84,7 +84,7 @@ def p_text(x: float | None) -> str:
 def file_name(s: str) -> str:
     """The part of a file name that stands for ``s`` (an agent name, a family): letters,
     digits and ``_.-`` kept, the rest ``_``, at most half of
-    :data:`icrsumo.fsio.MAX_FILE_NAME` characters (a longer name is cut and ends with a hash of it)."""
+    :data:`icrsumo.core.fsio.MAX_FILE_NAME` characters (a longer name is cut and ends with a hash of it)."""
     name = re.sub(r"[^A-Za-z0-9_.-]", "_", s)
     name = name if name not in ("", ".", "..") else f"x_{name}"
     return bounded_name(name, s, MAX_FILE_NAME // 2)

@@ -14,10 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import note, visible
-from ..fsio import write_atomic
-from ..summary import BASELINE, Summary
-from ..vocab import Family
+from icrsumo.core.errors import note, visible
+from icrsumo.core.fsio import write_atomic
+from icrsumo.core.vocab import Family
+from icrsumo.results.summary import BASELINE, Summary
 
 _FAMILY_MARKERS = {BASELINE: "o", Family.PARAPHRASE: "s", Family.AMBIGUITY: "^", Family.NOISE: "D",
                    Family.MISLEADING: "v"}

@@ -1,14 +1,15 @@
-"""The guard document's files (:func:`icrsumo.guards.measure.guard_doc`): guard.json, guard.md,
+"""The guard document's files (:func:`icrsumo.results.guards.guard_doc`): guard.json, guard.md,
 ``figures/guard_tradeoff.png``, and the lines the printed summary says of a run's guards."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import visible
-from ..fsio import dumps_json, write_atomic
-from ..guards.measure import PRESERVING
-from ..vocab import Family
+from icrsumo.core.errors import visible
+from icrsumo.core.fsio import dumps_json, write_atomic
+from icrsumo.core.vocab import Family
+from icrsumo.results.guards import PRESERVING
+
 from .cells import md_cell
 from .figures import figure, figure_or_note, plain_text, save_png
 

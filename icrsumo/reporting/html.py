@@ -8,9 +8,10 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
-from ..fsio import write_atomic
-from ..summary import Summary
-from ..types import EpisodeLog, EpisodeRecord, InstructionSet
+from icrsumo.core.fsio import write_atomic
+from icrsumo.core.types import EpisodeLog, EpisodeRecord, InstructionSet
+from icrsumo.results.summary import Summary
+
 from .html_route import Render, esc, route_section
 from .rows import table_cells
 
@@ -114,7 +115,7 @@ def html_report(summary: Summary, records: Sequence[EpisodeRecord], attribution:
                 nets: Callable[[str], object | None],
                 render: Callable[[str], Render | None]) -> str:
     """The page's HTML. ``attribution``: the attribution document
-    (:func:`icrsumo.attribution.attribution_doc`); ``logs(record)``: its stored log;
+    (:func:`icrsumo.results.attribution.attribution_doc`); ``logs(record)``: its stored log;
     ``sets(route)``: the route's instruction sequences by (family, k); ``nets(route)``: its
     RoadNet (None: no map); ``render(route)``: a function (x, y, yaw) -> PNG bytes of the map
     view there (None: no clips)."""

@@ -11,9 +11,10 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-from ..scoring.penalties import PENALTIES
-from ..types import EpisodeLog, EpisodeRecord, InstructionSet
-from ..vocab import Family
+from icrsumo.core.types import EpisodeLog, EpisodeRecord, InstructionSet
+from icrsumo.core.vocab import Family
+from icrsumo.scoring.penalties import PENALTIES
+
 from .trajectory import divergence_t, drawn_points
 
 #: the divergence clip: seconds before and after the divergence, seconds between frames

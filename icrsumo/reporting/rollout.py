@@ -8,12 +8,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..convert import safe_name
-from ..errors import visible
-from ..scenario import find_scenarios, read_scenario
-from ..store import ResultStore
-from ..types import EpisodeLog, EpisodeRecord
-from ..vocab import EventKind
+from icrsumo.core.errors import visible
+from icrsumo.core.types import EpisodeLog, EpisodeRecord
+from icrsumo.core.vocab import EventKind
+from icrsumo.results.store import ResultStore
+from icrsumo.world.convert import safe_name
+from icrsumo.world.scenario import find_scenarios, read_scenario
+
 from .figures import figure, plain_text, save_png
 from .trajectory import divergence_t
 
@@ -156,8 +157,8 @@ def rollout_figure(out: Path, store: ResultStore, records: list[EpisodeRecord], 
     """Paired rollout figure: the baseline against one variant of each of ``families`` for one
     route and agent (``route``, default the first with a finished baseline; the agent of the
     first finished baseline episode): the first variant that failed (else k = 0)."""
-    from ..instructions.store import read_instruction_sets
-    from ..networks import load_net
+    from icrsumo.instructions.store import read_instruction_sets
+    from icrsumo.world.networks import load_net
 
     done = [r for r in records if r.status == "done" and r.family == "baseline"]
     if not done:

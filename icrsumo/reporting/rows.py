@@ -4,7 +4,8 @@ of the family's episodes. results.md, results.tex and report.html show these cel
 
 from __future__ import annotations
 
-from ..summary import Block, FamilyStats, Summary
+from icrsumo.results.summary import Block, FamilyStats, Summary
+
 from .cells import ci, num, pct
 
 HEADER = ("Agent", "Family", "DS", "RC", "IS", "ΔDS [95% CI]", "ΔRC [95% CI]", "ΔIS", "worst ΔDS",

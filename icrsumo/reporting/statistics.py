@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..summary import FamilyStats, Summary
+from icrsumo.results.summary import FamilyStats, Summary
+
 from .cells import csv_text, md_cell, num, p_text
 
 _HEADER = ("Agent", "Family", "routes", "ΔDS", "rel. drop DS %", "rel. drop RC %", "p (Holm)",

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..summary import Block, FamilyStats, Summary
+from icrsumo.results.summary import Block, FamilyStats, Summary
+
 from .cells import csv_text
 
 HEADER = ("agent", "family", "n", "n_routes", "DS", "RC", "IS", "dDS", "dDS_ci95_lo", "dDS_ci95_hi",

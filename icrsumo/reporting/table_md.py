@@ -3,7 +3,8 @@ note under it."""
 
 from __future__ import annotations
 
-from ..summary import Summary
+from icrsumo.results.summary import Summary
+
 from .cells import md_cell
 from .rows import crash_note, table_cells
 

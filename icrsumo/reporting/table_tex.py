@@ -3,7 +3,8 @@ between agents, the crash note as a comment."""
 
 from __future__ import annotations
 
-from ..summary import Summary
+from icrsumo.results.summary import Summary
+
 from .cells import tex_escape, tex_num
 from .rows import crash_note, table_cells
 

@@ -3,7 +3,8 @@
 
 from __future__ import annotations
 
-from ..summary import Summary
+from icrsumo.results.summary import Summary
+
 from .table_csv import results_csv
 from .table_md import results_md
 from .table_tex import results_tex

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..types import EpisodeLog
+from icrsumo.core.types import EpisodeLog
 
 #: m: a variant has diverged where its ego is this far from the baseline's at the same time
 DIVERGED_M = 3.0

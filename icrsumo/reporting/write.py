@@ -7,11 +7,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from ..aggregate import EPISODE_COLUMNS, episode_table
-from ..fsio import dumps_json, write_atomic
-from ..scoring import DEFAULT_SCORING, get_scoring
-from ..summary import BASELINE, Summary
-from ..types import EpisodeRecord
+from icrsumo.core.fsio import dumps_json, write_atomic
+from icrsumo.core.types import EpisodeRecord
+from icrsumo.results.aggregate import EPISODE_COLUMNS, episode_table
+from icrsumo.results.summary import BASELINE, Summary
+from icrsumo.scoring import DEFAULT_SCORING, get_scoring
+
 from .cells import csv_text, file_name
 from .figures import delta_bars, figure_or_note, rd_to_plane
 from .statistics import statistics_tables
@@ -35,7 +36,7 @@ def write_report(summary: Summary, records: Sequence[EpisodeRecord], out_dir: Pa
     """Write summary.json, results.{md,csv,tex}, statistics.{md,csv}, episodes.csv, figures/rd_to.png,
     figures/delta_bars.png and leaderboard/<agent>_<family>.json (baseline included) under
     ``out_dir``; returns the Markdown table. ``ends``: the episodes' log facts for episodes.csv
-    (:func:`icrsumo.aggregate.episode_table`); paired rollout figures are written by the caller."""
+    (:func:`icrsumo.results.aggregate.episode_table`); paired rollout figures are written by the caller."""
     out = Path(out_dir)
     write_atomic(out / "summary.json", summary.to_json())
     t = tables(summary)

@@ -11,8 +11,9 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterable
 from typing import ClassVar
 
-from ..types import EpisodeLog, EpisodeRecord, EpisodeResult, Event, Infraction
-from ..vocab import EventKind
+from icrsumo.core.types import EpisodeLog, EpisodeRecord, EpisodeResult, Event, Infraction
+from icrsumo.core.vocab import EventKind
+
 from .criteria import RouteRules, TerminationMonitor, cut_at_end, ended_by
 from .penalties import PENALTIES, RULE_EVENTS, check_event_kinds, episode_result
 from .route import DenseRoute

@@ -26,8 +26,8 @@ says where 2.0 differs):
   length + 5 s)``, reached once more than that much simulated time has elapsed (``TimeOut``).
 
 The closed loop (:mod:`icrsumo.sim.episode`) feeds :class:`TerminationMonitor` one step at a
-time with the values the episode log stores (rounded as :mod:`icrsumo.logs` rounds them);
-:func:`replay` runs the same monitor over a recorded :class:`~icrsumo.types.EpisodeLog`, so a
+time with the values the episode log stores (rounded as :mod:`icrsumo.results.logs` rounds them);
+:func:`replay` runs the same monitor over a recorded :class:`~icrsumo.core.types.EpisodeLog`, so a
 stored log is rescored to the same numbers and the same termination; :func:`ended_by` cuts a
 log where other rules would have ended it.
 """
@@ -39,9 +39,10 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
-from icrsumo.scoring.route import DenseRoute, dense_route
-from icrsumo.types import EpisodeLog, Event
-from icrsumo.vocab import EventKind, Termination
+from icrsumo.core.types import EpisodeLog, Event
+from icrsumo.core.vocab import EventKind, Termination
+
+from .route import DenseRoute, dense_route
 
 #: RouteCompletionTest.WINDOWS_SIZE: points tried per tick beyond the current one
 COMPLETION_WINDOW = 2

@@ -25,8 +25,9 @@ import math
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from ..types import EpisodeLog, EpisodeRecord, Event
-from ..vocab import EventKind
+from icrsumo.core.types import EpisodeLog, EpisodeRecord, Event
+from icrsumo.core.vocab import EventKind
+
 from .base import Scoring
 from .criteria import EPS, OFF_LANES, WRONG_LANE, RouteRules, events_by_step, route_timeout
 from .leaderboard import LABELS, agent_records, record_infractions, route_name

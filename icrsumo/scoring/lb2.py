@@ -17,8 +17,9 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 
-from ..types import EpisodeLog, EpisodeRecord, Event, Infraction
-from ..vocab import EventKind
+from icrsumo.core.types import EpisodeLog, EpisodeRecord, Event, Infraction
+from icrsumo.core.vocab import EventKind
+
 from .base import Scoring
 from .criteria import (
     EPS,

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
 
-from ..types import EpisodeRecord
-from ..vocab import EpisodeStatus, EventKind, Termination
+from icrsumo.core.types import EpisodeRecord
+from icrsumo.core.vocab import EpisodeStatus, EventKind, Termination
 
 #: penalised event kind -> (infraction key, message)
 EVENT_ENTRIES = {

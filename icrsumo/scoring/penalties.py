@@ -1,15 +1,15 @@
 """What the rule sets share to turn a replayed episode into scores: the IS factor of each
 penalised event kind (the same in Leaderboard 1.0 and 2.0: ``statistics_manager.py``'s
 ``PENALTY_*``), the collision contacts their ``CollisionTest`` counters see, and the rounded
-:class:`~icrsumo.types.EpisodeResult`. Pure: no SUMO.
+:class:`~icrsumo.core.types.EpisodeResult`. Pure: no SUMO.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..types import TERMINATIONS, EpisodeLog, EpisodeResult, Event, Infraction
-from ..vocab import EventKind, Termination
+from icrsumo.core.types import TERMINATIONS, EpisodeLog, EpisodeResult, Event, Infraction
+from icrsumo.core.vocab import EventKind, Termination
 
 #: IS factor of each penalised event kind (statistics_manager.py: PENALTY_*)
 PENALTIES: dict[EventKind, float] = {
@@ -23,7 +23,7 @@ PENALTIES: dict[EventKind, float] = {
 #: Event kinds that are recorded but never penalised.
 NON_PENALISED: tuple[EventKind, ...] = tuple(k for k in EventKind if k not in PENALTIES)
 
-#: Every event kind an :class:`~icrsumo.types.EpisodeLog` may hold.
+#: Every event kind an :class:`~icrsumo.core.types.EpisodeLog` may hold.
 EVENT_KINDS: frozenset[EventKind] = frozenset(EventKind)
 
 #: CollisionTest (1.0 and 2.0): the last counted actor is remembered this long (s); static

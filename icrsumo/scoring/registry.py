@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..types import EpisodeLog, EpisodeResult
+from icrsumo.core.types import EpisodeLog, EpisodeResult
+
 from .base import Scoring
 
 #: name -> scoring (:func:`register_scoring` refuses a name twice)

@@ -12,7 +12,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from icrsumo.types import EpisodeLog
+from icrsumo.core.types import EpisodeLog
 
 #: hop (m) of the dense route (leaderboard: ``interpolate_trajectory(hop_resolution=1.0)``)
 HOP_M = 1.0

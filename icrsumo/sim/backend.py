@@ -16,8 +16,9 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from ..resources import sumo_home
-from ..scenario import Scenario
+from icrsumo.core.resources import sumo_home
+from icrsumo.world.scenario import Scenario
+
 from .frame import NO_LIGHTS, Contact, SimFrame
 
 EGO_ID = "ego"

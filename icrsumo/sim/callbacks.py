@@ -14,17 +14,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, NamedTuple
 
-from ..types import Event
+from icrsumo.core.types import Event
 
 if TYPE_CHECKING:
-    from ..agents.base import Action, Observation
+    from icrsumo.agents.base import Action, Observation
+
     from .episode import Episode
 
 
 class StepRecord(NamedTuple):
     """One recorded simulation step: time ``t`` (s), ego centre ``x``/``y`` (m), ``yaw`` (rad),
     ``speed`` (m/s), route ``progress`` (m), active ``instruction`` id (-1 none), ``outside``
-    (OutsideRouteLanesTest's bits, see :class:`~icrsumo.types.EpisodeLog`), ``route_dist`` (m),
+    (OutsideRouteLanesTest's bits, see :class:`~icrsumo.core.types.EpisodeLog`), ``route_dist`` (m),
     the step's ``events``, ``traffic_speed`` (m/s, mean of the other vehicles, -1 none) and
     ``speed_limit`` (m/s, of the nearest driving lane)."""
 
@@ -160,7 +161,7 @@ class VideoRecorder(EpisodeCallback):
         self._writer = None
 
     def on_start(self, episode: Episode) -> None:
-        from ..render import VideoWriter
+        from icrsumo.render import VideoWriter
 
         self._writer = VideoWriter(self.path)
 

@@ -33,7 +33,7 @@ import shapely
 from shapely.geometry import LineString, Polygon
 from shapely.ops import substring
 
-from ..networks import RoadNet
+from icrsumo.world.networks import RoadNet
 
 #: mitre limit of the lane outlines (a bend's outer corner reaches at most 2 half-widths out)
 MITRE_LIMIT = 2.0

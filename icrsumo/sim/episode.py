@@ -25,21 +25,22 @@ from dataclasses import dataclass, replace
 from functools import cache
 from pathlib import Path
 
-from ..agents.base import Action, Agent, EpisodeInfo, Observation, World, validate_action
-from ..control import WaypointController, WaypointPath
-from ..dynamics import Control, EgoState, VehicleParams, step
-from ..guards.base import Guard, guarded_name
-from ..guards.stream import GuardedStream
-from ..networks import load_net
-from ..render import BevRenderer, BevSpec
-from ..scenario import Scenario
-from ..scoring import get_scoring
-from ..scoring.criteria import TerminationMonitor
-from ..scoring.route import DenseRoute
-from ..types import EgoRoute, EpisodeLog, Event, InstructionSet
-from ..vocab import EventKind, Termination
+from icrsumo.agents.base import Action, Agent, EpisodeInfo, Observation, World, validate_action
+from icrsumo.core.types import EgoRoute, EpisodeLog, Event, InstructionSet
+from icrsumo.core.vocab import EventKind, Termination
+from icrsumo.guards.base import Guard, guarded_name
+from icrsumo.guards.stream import GuardedStream
+from icrsumo.render import BevRenderer, BevSpec
+from icrsumo.scoring import get_scoring
+from icrsumo.scoring.criteria import TerminationMonitor
+from icrsumo.scoring.route import DenseRoute
+from icrsumo.world.dynamics import Control, EgoState, VehicleParams, step
+from icrsumo.world.networks import load_net
+from icrsumo.world.scenario import Scenario
+
 from .backend import SimulatorError, SumoBackend
 from .callbacks import EpisodeCallback, LogRecorder, StepRecord
+from .control import WaypointController, WaypointPath
 from .drivable import drivable_area
 from .frame import SimFrame
 from .lanes import driving_lanes
@@ -66,7 +67,7 @@ def _renderer(net_path: str, spec: BevSpec) -> BevRenderer:
 
 
 def ego_route(sc: Scenario) -> EgoRoute:
-    """The scenario's route (:attr:`~icrsumo.scenario.Scenario.route`, its junction passes and
+    """The scenario's route (:attr:`~icrsumo.world.scenario.Scenario.route`, its junction passes and
     lane changes included): what the route-oracle is handed."""
     return sc.route
 
@@ -254,7 +255,7 @@ class Episode:
             self.recorder.events.append(Event(EventKind.EGO_TELEPORT, t, self.progress, "", state.x, state.y))
             self._finish(Termination.STUCK, t)
             return True
-        # the rules see the values the log stores (rounded as icrsumo.logs rounds them)
+        # the rules see the values the log stores (rounded as icrsumo.results.logs rounds them)
         mon = self.monitor
         t, x, y, speed = round(t, 3) + 0.0, round(state.x, 2) + 0.0, round(state.y, 2) + 0.0, \
             round(state.speed, 3) + 0.0
@@ -334,7 +335,7 @@ class Episode:
 def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
                 options: RunOptions = RunOptions(),  # noqa: B008
                 callbacks: Sequence[EpisodeCallback] = (), guard: Guard | None = None) -> EpisodeLog:
-    """Drive one episode with ``agent`` and return its log (:class:`icrsumo.types.EpisodeLog`).
+    """Drive one episode with ``agent`` and return its log (:class:`icrsumo.core.types.EpisodeLog`).
 
     The agent is reset with the episode's :class:`EpisodeInfo`, then acts on every observation;
     ``callbacks`` (:mod:`icrsumo.sim.callbacks`) attach side effects such as timings or video.

@@ -28,7 +28,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..networks import RoadNet
+from icrsumo.world.networks import RoadNet
 
 #: OutsideRouteLanesTest.ALLOWED_OUT_DISTANCE (m), Leaderboard 1.0 and 2.0
 ALLOWED_OUT_DISTANCE = 1.3

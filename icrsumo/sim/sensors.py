@@ -23,12 +23,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..dynamics import EgoState
-from ..networks import RoadNet
-from ..scoring.criteria import OFF_LANES, OFF_LANES_LB2, WRONG_LANE, WRONG_LANE_LB2
-from ..scoring.route import angle_diff
-from ..types import Event
-from ..vocab import EventKind
+from icrsumo.core.types import Event
+from icrsumo.core.vocab import EventKind
+from icrsumo.scoring.criteria import OFF_LANES, OFF_LANES_LB2, WRONG_LANE, WRONG_LANE_LB2
+from icrsumo.scoring.route import angle_diff
+from icrsumo.world.dynamics import EgoState
+from icrsumo.world.networks import RoadNet
+
 from .drivable import DrivableArea
 from .frame import NO_LIGHTS, SimFrame
 from .lanes import ALLOWED_OUT_DISTANCE_LB2, DrivingLanes, WrongLaneState, wrong_lane_step

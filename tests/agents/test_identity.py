@@ -11,15 +11,15 @@ import textwrap
 
 import pytest
 
+from icrsumo.agents.hosting.serve import AgentServer
 from icrsumo.agents.identity import fingerprint, short
 from icrsumo.agents.registry import agent_factory, load_class
 from icrsumo.agents.remote import RemoteFactory
-from icrsumo.agents.serve import AgentServer
-from icrsumo.errors import InputError
+from icrsumo.core.errors import InputError
+from icrsumo.core.types import EpisodeRecord
+from icrsumo.core.vocab import EpisodeStatus
 from icrsumo.learn.agent import CHECKPOINTS
-from icrsumo.store import ResultStore
-from icrsumo.types import EpisodeRecord
-from icrsumo.vocab import EpisodeStatus
+from icrsumo.results.store import ResultStore
 
 AGENT = '''
 import numpy as np

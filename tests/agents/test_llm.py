@@ -32,9 +32,9 @@ from icrsumo.agents.llm import (
 )
 from icrsumo.agents.registry import agent_factory
 from icrsumo.agents.remote import free_port
-from icrsumo.errors import InputError
-from icrsumo.llmio import Invalid, ResponseCache, request_hash
-from icrsumo.types import Intent
+from icrsumo.core.errors import InputError
+from icrsumo.core.llmio import Invalid, ResponseCache, request_hash
+from icrsumo.core.types import Intent
 
 SCENE = Scene(speed=8.26, lane=1, lanes=2, junction_m=35.4, branches=("left", "straight"), light="green",
               lead_m=None)
@@ -473,7 +473,7 @@ def _leaks(out: Path, proc, secrets: list[str]) -> list[str]:
 
 
 def _messages(out: Path) -> list[str]:
-    from icrsumo.store import ResultStore
+    from icrsumo.results.store import ResultStore
 
     with ResultStore(out / "results.sqlite") as store:
         return [r.message for r in store.records()]
@@ -536,7 +536,7 @@ def test_a_page_instead_of_answers_crashes_episodes_and_the_right_server_repairs
 
 @pytest.mark.sumo
 def test_a_password_in_a_remote_url_is_never_stored_or_printed(suite, tmp_path):
-    from icrsumo.agents.serve import AgentServer
+    from icrsumo.agents.hosting.serve import AgentServer
 
     agents = Path(__file__).parents[1] / "data" / "agents" / "user_agents.py"
     srv = AgentServer(f"{agents}:BevKeeper").start()
@@ -552,7 +552,7 @@ def test_a_password_in_a_remote_url_is_never_stored_or_printed(suite, tmp_path):
 
 
 def test_an_unwritable_cache_stops_the_run_before_anything_is_written(server, tmp_path, capsys):
-    from icrsumo.cli import main
+    from icrsumo.app.cli.main import main
 
     out = tmp_path / "out"
     out.mkdir()

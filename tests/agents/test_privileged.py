@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from icrsumo.agents.conflicts import ConflictMap, junction_of, project
-from icrsumo.networks import load_net
-from icrsumo.resources import bundled_towns
+from icrsumo.core.resources import bundled_towns
+from icrsumo.world.networks import load_net
 
 
 def test_project_on_segments_not_vertices():
@@ -105,11 +105,11 @@ FIXED = {
 @pytest.mark.parametrize(("suite", "route"), sorted(FIXED), ids=lambda v: str(v))
 def test_route_oracle_drives_the_root_caused_routes_cleanly(suite, route, cache):
     from icrsumo.agents.privileged import RouteOracle
-    from icrsumo.bundled import bundled_route
+    from icrsumo.evaluation.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.scenario import read_scenario
     from icrsumo.scoring import score_episode
     from icrsumo.sim.episode import run_episode
+    from icrsumo.world.scenario import read_scenario
 
     sc_dir, instr = bundled_route(route, suite)
     log = run_episode(read_scenario(sc_dir), read_instruction_sets(instr)[0], RouteOracle())

@@ -14,7 +14,7 @@ import pytest
 
 import icrsumo.agents as agents_pkg
 from icrsumo.agents.base import Action, EpisodeInfo, Observation, batch_hook
-from icrsumo.agents.batching import BatchingCore, Task
+from icrsumo.agents.hosting.batching import BatchingCore, Task
 from icrsumo.agents.privileged import InstructionFollower, RouteOracle
 from icrsumo.agents.registry import (
     BUILTIN,
@@ -27,7 +27,7 @@ from icrsumo.agents.registry import (
     register,
     unregister,
 )
-from icrsumo.errors import InputError
+from icrsumo.core.errors import InputError
 from icrsumo.learn.agent import CHECKPOINTS, LearnedAgent
 
 AGENTS_DIR = Path(agents_pkg.__file__).parent
@@ -145,7 +145,7 @@ def _imports(path: Path) -> set[str]:
 def test_no_import_cycle_between_registry_and_transports():
     registry = _imports(AGENTS_DIR / "registry.py")
     assert not any("batched" in m or "serve" in m for m in registry), registry
-    batching = _imports(AGENTS_DIR / "batching.py")
+    batching = _imports(AGENTS_DIR / "hosting" / "batching.py")
     assert not any(m.endswith(("registry", "serve", "batched", "remote")) for m in batching), batching
     code = ("import sys, icrsumo.agents.registry; "
             "print(sorted(m for m in sys.modules if m.startswith('icrsumo.agents.')))")
@@ -154,7 +154,7 @@ def test_no_import_cycle_between_registry_and_transports():
 
 
 def test_no_process_state_in_environment_or_module_globals():
-    for module in ("batched.py", "registry.py", "serve.py", "batching.py"):
+    for module in ("hosting/batched.py", "registry.py", "hosting/serve.py", "hosting/batching.py"):
         text = (AGENTS_DIR / module).read_text(encoding="utf-8")
         assert "os.environ" not in text and "LAST_STATS" not in text and "_CONNS" not in text, module
     learned = (AGENTS_DIR.parent / "learn" / "agent.py").read_text(encoding="utf-8")

@@ -25,7 +25,7 @@ from icrsumo.agents.remote import (
     encode_obs,
     free_port,
 )
-from icrsumo.cli import main
+from icrsumo.app.cli.main import main
 
 INFO = EpisodeInfo("r", "town", "net.xml", 0.05, 0.1, 7)
 
@@ -129,7 +129,7 @@ class _SlowBatch:
 
 
 def test_concurrent_acts_are_batched_with_per_session_state():
-    from icrsumo.agents.serve import AgentServer
+    from icrsumo.agents.hosting.serve import AgentServer
 
     register("slow-batch", _SlowBatch)
     try:
@@ -189,9 +189,9 @@ def _post(url: str, path: str, body: bytes, headers: dict | None = None) -> tupl
 
 
 def test_a_shared_key_guards_the_server_and_hostile_json_is_a_400(monkeypatch, capsys):
+    from icrsumo.agents.hosting.serve import AgentServer
     from icrsumo.agents.remote import RemoteFactory
-    from icrsumo.agents.serve import AgentServer
-    from icrsumo.errors import InputError
+    from icrsumo.core.errors import InputError
 
     register("cruise-key", _Cruise)
     try:
@@ -226,7 +226,7 @@ def test_a_shared_key_guards_the_server_and_hostile_json_is_a_400(monkeypatch, c
 
 
 def test_serving_beyond_the_loopback_without_a_key_says_so(monkeypatch, capsys):
-    import icrsumo.agents.serve as serve_mod
+    import icrsumo.agents.hosting.serve as serve_mod
 
     monkeypatch.setattr(serve_mod.AgentServer, "serve_forever", lambda self: None)   # start, say, stop
     monkeypatch.setattr(serve_mod.AgentServer, "shutdown", lambda self: self.httpd.server_close())
@@ -316,7 +316,7 @@ def test_a_password_in_the_url_goes_as_basic_auth_and_is_redacted_everywhere():
 
 def test_a_redirect_is_not_followed_so_the_key_stays_with_its_server(monkeypatch):
     from icrsumo.agents.remote import RemoteFactory
-    from icrsumo.errors import InputError
+    from icrsumo.core.errors import InputError
 
     monkeypatch.setenv("ICR_TEST_KEY", "s3cret-key-77")
     with _echo() as (other, elsewhere), _echo(moved=f"http://127.0.0.1:{other}") as (port, handler):

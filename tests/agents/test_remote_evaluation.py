@@ -16,7 +16,7 @@ import pytest
 
 from icrsumo.agents.registry import BUILTIN
 from icrsumo.evaluation import EvalOptions, run_evaluation
-from icrsumo.store import ResultStore
+from icrsumo.results.store import ResultStore
 
 pytestmark = pytest.mark.sumo
 

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from icrsumo.networks import load_net
-from icrsumo.resources import bundled_towns
-from icrsumo.routes import format_routes
+from icrsumo.core.resources import bundled_towns
+from icrsumo.core.types import RouteSpec, Waypoint
 from icrsumo.sim.callbacks import EpisodeCallback
-from icrsumo.types import RouteSpec, Waypoint
+from icrsumo.world.networks import load_net
+from icrsumo.world.routes import format_routes
 
 
 def route_through(town: str, edges: list[str], start: float = 10.0, end: float | None = None,
@@ -35,12 +35,12 @@ def drive(tmp_path: Path, spec: RouteSpec, traffic: str = "normal", edit=None, c
     (scenario, episode log, result). ``edit(sumocfg_text) -> text`` changes the scenario's
     SUMO configuration first."""
     from icrsumo.agents.privileged import RouteOracle
-    from icrsumo.convert import ConvertOptions, convert_routes
     from icrsumo.instructions.generate import GenerateOptions, generate
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.scenario import read_scenario
     from icrsumo.scoring import score_episode
     from icrsumo.sim.episode import run_episode
+    from icrsumo.world.convert import ConvertOptions, convert_routes
+    from icrsumo.world.scenario import read_scenario
 
     f = tmp_path / "route.xml"
     f.write_text(format_routes([spec]))
@@ -93,7 +93,7 @@ def test_lane_change_gap_is_judged_by_time_to_reach_the_ego(back, speed, free):
     import numpy as np
 
     from icrsumo.agents.privileged import RouteOracle
-    from icrsumo.dynamics import EgoState
+    from icrsumo.world.dynamics import EgoState
 
     net = load_net(bundled_towns()["Town06"])
     edge = next(e for e in sorted(net.passenger_lanes) if len(net.passenger_lanes[e]) >= 3
@@ -123,7 +123,7 @@ def test_a_car_coming_up_inside_the_junction_before_a_short_lane_is_seen(speed, 
     import numpy as np
 
     from icrsumo.agents.privileged import InstructionFollower
-    from icrsumo.dynamics import EgoState
+    from icrsumo.world.dynamics import EgoState
 
     net = load_net(bundled_towns()["Town10HD"])
     assert net.edge_length["-14"] < 10.0
@@ -174,10 +174,10 @@ def test_sumo_never_teleports_the_ego_out_of_a_queue(tmp_path):
     route the ego queues behind a jam for more than 120 s: without the opt-out SUMO teleported
     it and the episode ended 'stuck' at RC 86.8."""
     from icrsumo.agents.privileged import RouteOracle
-    from icrsumo.bundled import bundled_route
+    from icrsumo.evaluation.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.scenario import read_scenario
     from icrsumo.sim.episode import run_episode
+    from icrsumo.world.scenario import read_scenario
 
     sc_dir, instr = bundled_route("carla_fidelity_mixed_022", "carla-fidelity")
     scenario = read_scenario(sc_dir)
@@ -196,12 +196,12 @@ def test_a_left_turner_waiting_for_a_gap_does_not_hold_the_queue_behind_it_forev
     driver fully impatient after IMPATIENCE_S s of waiting (SUMO's --time-to-impatience,
     default 180 s): it then takes a gap that makes the oncoming car brake."""
     from icrsumo.agents.privileged import RouteOracle
-    from icrsumo.bundled import bundled_route
-    from icrsumo.convert import IMPATIENCE_S
+    from icrsumo.evaluation.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.scenario import read_scenario
     from icrsumo.scoring import score_episode
     from icrsumo.sim.episode import run_episode
+    from icrsumo.world.convert import IMPATIENCE_S
+    from icrsumo.world.scenario import read_scenario
 
     sc_dir, instr = bundled_route("carla_fidelity_mixed_024", "carla-fidelity")
     cfg = (sc_dir / "scenario.sumocfg").read_text(encoding="utf-8")
@@ -365,9 +365,9 @@ def test_a_sliver_between_lane_outlines_is_drivable():
     """Class G at the pose where it happened: with the outlines alone two corners of the
     footprint are off at once (a roadside event, DS 65.0 on that route); with the drivable area
     as built now (joints, 5 cm closing, 0.1 m tolerance) none is."""
-    from icrsumo.dynamics import EgoState
     from icrsumo.sim.drivable import drivable_area
     from icrsumo.sim.sensors import off_corners
+    from icrsumo.world.dynamics import EgoState
 
     net = load_net(bundled_towns()["Town01"])
     ego = EgoState(*SLIVER_POSE, 0.0)
@@ -380,14 +380,14 @@ def test_the_sliver_route_drives_without_a_roadside_event():
     """carla_fidelity_mixed_000 (Town01), the route of class G's event, driven in SUMO: no
     roadside event, and nowhere on it are two corners off the area as built now."""
     from icrsumo.agents.privileged import RouteOracle
-    from icrsumo.bundled import bundled_route
-    from icrsumo.dynamics import EgoState
+    from icrsumo.evaluation.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.scenario import read_scenario
     from icrsumo.scoring import score_episode
     from icrsumo.sim.drivable import drivable_area
     from icrsumo.sim.episode import run_episode
     from icrsumo.sim.sensors import off_corners
+    from icrsumo.world.dynamics import EgoState
+    from icrsumo.world.scenario import read_scenario
 
     sc_dir, instr = bundled_route("carla_fidelity_mixed_000", "carla-fidelity")
     scenario = read_scenario(sc_dir)
@@ -429,11 +429,11 @@ def test_traced_fidelity_routes_drive_clean(route, before):
     """Routes of the fidelity suite whose vehicle collisions were traced and fixed
     (docs/fidelity.md); each had DS 60.0 before."""
     from icrsumo.agents.privileged import RouteOracle
-    from icrsumo.bundled import bundled_route
+    from icrsumo.evaluation.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.scenario import read_scenario
     from icrsumo.scoring import score_episode
     from icrsumo.sim.episode import run_episode
+    from icrsumo.world.scenario import read_scenario
 
     sc_dir, instr = bundled_route(route, "carla-fidelity")
     log = run_episode(read_scenario(sc_dir), read_instruction_sets(instr)[0], RouteOracle())
@@ -448,11 +448,11 @@ def test_instruction_follower_chooses_again_when_a_new_instruction_comes_before_
     (route deviation at RC 2.4). A new instruction before the junction's entry now reopens
     the choice."""
     from icrsumo.agents.privileged import InstructionFollower
-    from icrsumo.bundled import bundled_route
+    from icrsumo.evaluation.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.scenario import read_scenario
     from icrsumo.scoring import score_episode
     from icrsumo.sim.episode import run_episode
+    from icrsumo.world.scenario import read_scenario
 
     sc_dir, instr = bundled_route("carla_fidelity_junctions_009", "carla-fidelity")
     log = run_episode(read_scenario(sc_dir), read_instruction_sets(instr)[0], InstructionFollower())
@@ -490,10 +490,10 @@ def test_instruction_follower_follows_closely_spaced_maneuvers(route, until, bef
     baseline instructions came (layout 1) and how the follower used them (docs/fidelity.md):
     now the follower reaches ``until`` m without a route deviation."""
     from icrsumo.agents.privileged import InstructionFollower
-    from icrsumo.bundled import bundled_route
+    from icrsumo.evaluation.bundled import bundled_route
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.scenario import read_scenario
     from icrsumo.sim.episode import run_episode
+    from icrsumo.world.scenario import read_scenario
 
     sc_dir, instr = bundled_route(route, "carla-fidelity")
     with pytest.raises(_Passed):
@@ -516,7 +516,7 @@ def test_a_roundabout_instruction_takes_the_ring_not_the_slip_road():
     """Town03, edge 34 (carla_fidelity_junctions_005): the approach offers the roundabout
     (-36, straight on) and a slip road to the right (15). "Take the first exit out of the
     roundabout." reads as right: the follower took the slip road and left the route."""
-    from icrsumo.types import Intent
+    from icrsumo.core.types import Intent
 
     f = _follower_on("Town03", Intent.RIGHT, "Take the first exit out of the roundabout.")
     assert "-36" in f.net.roundabout_edges and "15" not in f.net.roundabout_edges
@@ -530,7 +530,7 @@ def test_an_instruction_is_used_up_by_the_junction_it_names():
     """Town04 (carla_fidelity_junctions_006): "Make a right turn at the traffic light." is
     carried out at the end of edge 25; 3.6 m later, at the end of edge 13, the route goes
     straight on (12). The follower turned right again (21) before the next instruction came."""
-    from icrsumo.types import Intent
+    from icrsumo.core.types import Intent
 
     f = _follower_on("Town04", Intent.RIGHT, "Make a right turn at the traffic light.")
     assert f.choose(None, "25", ["-14", "13", "24"], tentative=False) == "13"

@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from icrsumo.agents.identity import short
-from icrsumo.cli import main
+from icrsumo.app.cli.main import main
 
 pytestmark = pytest.mark.sumo
 

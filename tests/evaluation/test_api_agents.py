@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import icrsumo
-import icrsumo.store
+import icrsumo.results.store
 from icrsumo.agents.base import Action
-from icrsumo.errors import InputError
+from icrsumo.core.errors import InputError
 
 pytestmark = pytest.mark.sumo
 
@@ -50,7 +50,7 @@ def test_classes_functions_instances_and_specs_in_one_run(tmp_path):
     assert slow.resets == 0  # every episode drove a fresh copy of the instance
     agents = json.loads((tmp_path / "config.json").read_text())["agents"]
     assert agents["cruise"]["spec"].startswith("python:") and agents["cruise"]["spec"].endswith("Cruise")
-    with icrsumo.store.ResultStore(tmp_path / "results.sqlite") as store:
+    with icrsumo.results.store.ResultStore(tmp_path / "results.sqlite") as store:
         took = {r.agent: r.duration for r in store.records() if r.family == "baseline"}
     assert took["cruise-slow"] > took["cruise"] > took["cruise-fast"]  # three speeds, three agents driven
     again = icrsumo.evaluate(agents=[Cruise, make_fast, slow, mid, "route-oracle"], **kw)

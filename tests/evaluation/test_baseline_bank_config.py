@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 import icrsumo
-from icrsumo.cli import main
-from icrsumo.errors import InputError
+from icrsumo.app.cli.main import main
+from icrsumo.core.errors import InputError
 
 pytestmark = pytest.mark.sumo
 
@@ -25,9 +25,9 @@ ROUTES = ("tiny_003", "tiny_012")
 @pytest.fixture(scope="module")
 def suite(tmp_path_factory) -> Path:
     """Two tiny routes converted without background traffic."""
-    from icrsumo.convert import ConvertOptions, convert_routes
-    from icrsumo.resources import bundled_suites
-    from icrsumo.routes import format_routes, read_routes
+    from icrsumo.core.resources import bundled_suites
+    from icrsumo.world.convert import ConvertOptions, convert_routes
+    from icrsumo.world.routes import format_routes, read_routes
 
     d = tmp_path_factory.mktemp("bank_suite")
     specs, _ = read_routes(bundled_suites()["tiny"])

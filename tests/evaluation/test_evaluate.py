@@ -14,11 +14,11 @@ from pathlib import Path
 
 import pytest
 
-from icrsumo.cli import main
-from icrsumo.convert import CONVERTER_VERSION
-from icrsumo.digests import DIGEST_RE, folder_digest
+from icrsumo.app.cli.main import main
 from icrsumo.evaluation import EvalOptions, run_evaluation
-from icrsumo.store import ResultStore
+from icrsumo.evaluation.digests import DIGEST_RE, folder_digest
+from icrsumo.results.store import ResultStore
+from icrsumo.world.convert import CONVERTER_VERSION
 
 pytestmark = pytest.mark.sumo
 

@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from icrsumo.cli import main
+from icrsumo.app.cli.main import main
 from icrsumo.instructions.store import read_instruction_sets
 
 pytestmark = pytest.mark.sumo

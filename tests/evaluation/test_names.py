@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from icrsumo.fsio import MAX_FILE_NAME
+from icrsumo.core.fsio import MAX_FILE_NAME
 
 pytestmark = pytest.mark.sumo
 

@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 
 from icrsumo.agents.base import AgentTimeout, EpisodeInfo, Observation
-from icrsumo.agents.watch import AlarmWatch
-from icrsumo.errors import describe
+from icrsumo.agents.hosting.watch import AlarmWatch
+from icrsumo.core.errors import describe
+from icrsumo.core.vocab import ErrorKind, OutcomeStatus
 from icrsumo.evaluation import EvalOptions, Job, Outcome, plan_jobs, run_evaluation
 from icrsumo.evaluation.backends.local import run_local
 from icrsumo.evaluation.execute import WatchedAgent, run_job
 from icrsumo.evaluation.plan import prepare_suite
-from icrsumo.store import ResultStore
-from icrsumo.vocab import ErrorKind, OutcomeStatus
+from icrsumo.results.store import ResultStore
 
 pytestmark = pytest.mark.sumo
 

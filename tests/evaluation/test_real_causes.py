@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from icrsumo.resources import bundled_suites
+from icrsumo.core.resources import bundled_suites
 
 pytestmark = pytest.mark.sumo
 

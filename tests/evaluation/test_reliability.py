@@ -11,12 +11,12 @@ from pathlib import Path
 
 import pytest
 
-from icrsumo.cli import main
-from icrsumo.errors import InputError
+from icrsumo.app.cli.main import main
+from icrsumo.core.errors import InputError
+from icrsumo.core.types import EpisodeRecord
 from icrsumo.evaluation import EvalOptions, report_only, run_evaluation
-from icrsumo.store import ResultStore
-from icrsumo.summary import EpisodeCounts
-from icrsumo.types import EpisodeRecord
+from icrsumo.results.store import ResultStore
+from icrsumo.results.summary import EpisodeCounts
 
 AGENTS = Path(__file__).parents[1] / "data" / "agents" / "user_agents.py"
 

@@ -13,7 +13,7 @@ import pytest
 
 import icrsumo
 from icrsumo.guards.registry import GUARDS
-from icrsumo.store import ResultStore
+from icrsumo.results.store import ResultStore
 
 pytestmark = pytest.mark.sumo
 
@@ -102,7 +102,7 @@ def test_a_failing_guard_crashes_its_episodes_with_the_reason(tmp_path):
 
 
 def test_attack_searches_behind_the_guard_too(tmp_path):
-    from icrsumo.attack import AttackOptions, run_attack
+    from icrsumo.evaluation.attack import AttackOptions, run_attack
 
     doc = run_attack(AttackOptions(out=tmp_path / "a", agents=("instruction-follower",), guards=("plan",),
                                    routes=("tiny_000",), budget=2))

@@ -11,10 +11,10 @@ import time
 
 import pytest
 
-from icrsumo.agents.watch import AlarmWatch, Unwatched
+from icrsumo.agents.hosting.watch import AlarmWatch, Unwatched
 from icrsumo.evaluation.execute import WatchedGuard
 from icrsumo.guards.base import GuardContext, GuardInfo, GuardTimeout
-from icrsumo.store import ResultStore
+from icrsumo.results.store import ResultStore
 
 HANG = '''
 import time

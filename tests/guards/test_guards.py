@@ -9,13 +9,13 @@ import sys
 import pytest
 
 from icrsumo.agents.registry import register_plugins
-from icrsumo.errors import InputError
+from icrsumo.core.errors import InputError
+from icrsumo.core.types import Intent, Maneuver
+from icrsumo.core.vocab import Verdict
 from icrsumo.guards.base import GuardContext, GuardError, NavPlan, PlanStep, plan_at, verdict_of
 from icrsumo.guards.plan import PlanGuard
 from icrsumo.guards.registry import GUARDS, GuardRegistry, guard_factory, guard_name
 from icrsumo.guards.text import TextGuard
-from icrsumo.types import Intent, Maneuver
-from icrsumo.vocab import Verdict
 
 L, R, S, F = Intent.LEFT, Intent.RIGHT, Intent.STRAIGHT, Intent.FOLLOW
 

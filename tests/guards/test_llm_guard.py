@@ -9,13 +9,13 @@ import shutil
 import pytest
 
 from icrsumo.agents.remote import free_port
-from icrsumo.api import evaluate
-from icrsumo.errors import InputError
+from icrsumo.app.api import evaluate
+from icrsumo.core.errors import InputError
+from icrsumo.core.types import Intent
+from icrsumo.core.vocab import Verdict
 from icrsumo.guards.base import GuardContext, NavPlan, PlanStep
 from icrsumo.guards.llm import build_request, llm_guard_factory, parse_verdict, question
-from icrsumo.store import ResultStore
-from icrsumo.types import Intent
-from icrsumo.vocab import Verdict
+from icrsumo.results.store import ResultStore
 
 ROUTES = ["tiny_000"]
 

@@ -7,9 +7,9 @@ import shutil
 
 import pytest
 
-from icrsumo.errors import InputError
+from icrsumo.core.errors import InputError
+from icrsumo.core.resources import data_dir
 from icrsumo.instructions.banks import MIN_ENTRIES, NAV_INTENTS, load_banks
-from icrsumo.resources import data_dir
 
 
 def test_bundled_banks_are_valid():

@@ -12,8 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from icrsumo.cli import main
-from icrsumo.errors import InputError
+from icrsumo.app.cli.main import main
+from icrsumo.core.errors import InputError
+from icrsumo.core.types import Intent, Maneuver
 from icrsumo.instructions.banks import BASELINE_TYPES, ORDINALS, fill, load_banks
 from icrsumo.instructions.baseline import build_baseline
 from icrsumo.instructions.baseline_bank import (
@@ -22,7 +23,6 @@ from icrsumo.instructions.baseline_bank import (
     langauto_id,
     load_baseline_bank,
 )
-from icrsumo.types import Intent, Maneuver
 
 DATA = Path(__file__).parents[1] / "data"
 BANK = DATA / "langauto_style_bank.json"
@@ -246,8 +246,8 @@ def test_bank_problems_name_the_place(tmp_path):
 @pytest.fixture(scope="module")
 def tiny_none(tmp_path_factory) -> Path:
     """The tiny split converted without background traffic (the instructions do not depend on it)."""
-    from icrsumo.convert import ConvertOptions, convert_routes
-    from icrsumo.resources import bundled_suites
+    from icrsumo.core.resources import bundled_suites
+    from icrsumo.world.convert import ConvertOptions, convert_routes
 
     out = tmp_path_factory.mktemp("tiny_none")
     rep = convert_routes(bundled_suites()["tiny"], out, ConvertOptions(traffic="none", workers=1))

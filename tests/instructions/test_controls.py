@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import pytest
 
+from icrsumo.core.types import Intent
+from icrsumo.core.vocab import CONTROL_FAMILIES, variants_of
 from icrsumo.instructions.banks import baseline_catalogue, load_banks
 from icrsumo.instructions.families import FAMILIES, make_variants
 from icrsumo.instructions.generate import route_rng
 from icrsumo.instructions.intent import classify_intent
 from icrsumo.instructions.store import read_instruction_sets
-from icrsumo.types import Intent
-from icrsumo.vocab import CONTROL_FAMILIES, variants_of
 
 
 @pytest.fixture(scope="module")

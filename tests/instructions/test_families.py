@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from icrsumo.errors import InputError
+from icrsumo.core.errors import InputError
+from icrsumo.core.types import Intent
 from icrsumo.instructions.banks import CONTRADICTS, load_banks
 from icrsumo.instructions.families import FAMILIES, make_variants
 from icrsumo.instructions.intent import classify_intent
 from icrsumo.instructions.store import read_instruction_sets
-from icrsumo.types import Intent
 
 
 def _files(generated):

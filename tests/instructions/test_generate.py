@@ -5,8 +5,8 @@ from __future__ import annotations
 import json
 import shutil
 
-from icrsumo.cli import main
-from icrsumo.resources import data_dir
+from icrsumo.app.cli.main import main
+from icrsumo.core.resources import data_dir
 
 
 def _tree(root):

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from icrsumo.core.types import Intent
 from icrsumo.instructions.intent import classify_intent, normalize
-from icrsumo.types import Intent
 
 L, R, S, F = Intent.LEFT, Intent.RIGHT, Intent.STRAIGHT, Intent.FOLLOW
 LL, LR, ST, U = Intent.LANE_LEFT, Intent.LANE_RIGHT, Intent.STOP, Intent.UNKNOWN

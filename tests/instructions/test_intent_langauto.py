@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from icrsumo.core.types import Intent
 from icrsumo.instructions.intent import classify_intent
-from icrsumo.types import Intent
 
 DATA = json.loads((Path(__file__).parents[1] / "data" / "langauto_style_intents.json").read_text())
 

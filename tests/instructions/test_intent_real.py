@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from icrsumo.core.types import Intent
 from icrsumo.instructions.intent import classify_intent
-from icrsumo.types import Intent
 
 DATA = json.loads((Path(__file__).parents[1] / "data" / "real_phrasings.json").read_text())
 CATEGORIES = {"condition", "other_road_user", "overtake", "fork", "no_maneuver", "plain"}

@@ -6,10 +6,10 @@ import dataclasses
 
 import pytest
 
+from icrsumo.core.types import Intent
 from icrsumo.instructions.intent import classify_intent
 from icrsumo.instructions.rules import Level, Mention, choose, mentions
 from icrsumo.instructions.spelling import tokens
-from icrsumo.types import Intent
 
 
 @pytest.mark.parametrize(("text", "expected"), [

@@ -13,10 +13,10 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import pytest
 
+from icrsumo.core.types import Instruction, InstructionSet, Intent, Notice
 from icrsumo.instructions import llm
 from icrsumo.instructions.intent import classify_intent
 from icrsumo.instructions.llm import LLMConfig, LLMError, llm_variants
-from icrsumo.types import Instruction, InstructionSet, Intent, Notice
 
 BASELINE = InstructionSet(
     route_id="r7",

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from collections import Counter
 
+from icrsumo.core.types import Intent, JunctionPass, Maneuver
 from icrsumo.instructions.banks import load_banks
 from icrsumo.instructions.baseline import NEXT_ROOM_M, build_baseline
 from icrsumo.instructions.intent import classify_intent
 from icrsumo.instructions.maneuvers import extract_maneuvers, lane_change_pos, roundabout_intent
 from icrsumo.instructions.store import read_instruction_sets
-from icrsumo.networks import load_net
-from icrsumo.scenario import find_scenarios, read_scenario
-from icrsumo.types import Intent, JunctionPass, Maneuver
+from icrsumo.world.networks import load_net
+from icrsumo.world.scenario import find_scenarios, read_scenario
 
 
 def _all(converted):

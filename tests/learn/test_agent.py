@@ -69,9 +69,9 @@ def test_batched_inference_matches_single(name):
 @pytest.mark.parametrize("name", SHIPPED[:1])
 def test_learned_agent_closed_loop_is_repeatable(name, converted, generated):
     from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.logs import dumps_log
-    from icrsumo.scenario import find_scenarios, read_scenario
+    from icrsumo.results.logs import dumps_log
     from icrsumo.sim.episode import run_episode
+    from icrsumo.world.scenario import find_scenarios, read_scenario
 
     sc = read_scenario(find_scenarios(converted["tiny"])[0])
     iset = read_instruction_sets(generated["tiny"] / f"{sc.route_id}.json")[0]

@@ -3,9 +3,9 @@ import re
 
 import numpy as np
 
+from icrsumo.core.resources import data_dir
 from icrsumo.instructions.banks import load_banks
 from icrsumo.learn.augment import add_noise, augment, load_train_bank, paraphrase
-from icrsumo.resources import data_dir
 
 
 def _norm(t: str) -> str:

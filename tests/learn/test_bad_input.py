@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 import torch
 
-from icrsumo.cli import main
-from icrsumo.errors import Field, InputError
+from icrsumo.app.cli.main import main
+from icrsumo.core.errors import Field, InputError
 from icrsumo.learn import nets
 from icrsumo.learn.agent import CHECKPOINTS, LearnedAgent
 from icrsumo.learn.collect import COLLECT_FORMAT, CollectOptions, collect

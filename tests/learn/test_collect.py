@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from icrsumo.errors import InputError
+from icrsumo.core.errors import InputError
+from icrsumo.core.resources import bundled_suites, suite_coords
 from icrsumo.learn.collect import CollectOptions, collect, collect_episode
-from icrsumo.resources import bundled_suites, suite_coords
-from icrsumo.scenario import find_scenarios
+from icrsumo.world.scenario import find_scenarios
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,7 @@ import pytest
 import torch
 from threadpoolctl import threadpool_limits
 
-from icrsumo.errors import InputError
+from icrsumo.core.errors import InputError
 from icrsumo.learn import nets
 from icrsumo.learn.collect import CollectOptions, collect
 from icrsumo.learn.config import config_dict
@@ -210,7 +210,7 @@ def test_every_shipped_agent_is_exact_on_recorded_observations(converted):
     tiny suite (tools/exact_proof.py runs the same on 10,000 frames per checkpoint)."""
     from icrsumo.learn.agent import CHECKPOINTS
     from icrsumo.learn.exact.proof import prove, record
-    from icrsumo.scenario import find_scenarios
+    from icrsumo.world.scenario import find_scenarios
 
     frames = record(find_scenarios(converted["tiny"])[:3], 256, every=3)
     assert len(frames) == 256 and len(set(frames.texts)) >= 2

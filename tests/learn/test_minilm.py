@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from icrsumo.cli import main
-from icrsumo.errors import InputError
+from icrsumo.app.cli.main import main
+from icrsumo.core.errors import InputError
 from icrsumo.learn import minilm
 from icrsumo.learn.minilm import DIM, MODEL, TOKENIZER, SentenceEncoder, int64_mm
 

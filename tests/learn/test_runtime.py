@@ -4,7 +4,7 @@ as torch within float rounding, deterministic, independent of the batch, and the
 import numpy as np
 import pytest
 
-from icrsumo.errors import InputError
+from icrsumo.core.errors import InputError
 from icrsumo.learn.agent import CHECKPOINTS, LearnedAgent, act_batch
 from icrsumo.learn.nets import Policy, onnx_bytes
 from icrsumo.learn.runtime import INPUTS, OUTPUTS, OrtFuse

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from icrsumo.cli import main
+from icrsumo.app.cli.main import main
 from icrsumo.learn import nets
 from icrsumo.learn.collect import CollectOptions, collect
 from icrsumo.learn.train import TrainConfig, load_dataset
@@ -151,7 +151,7 @@ def test_the_tuned_encoder_starts_at_the_pretrained_layer_and_trains_it(tiny_dat
 
 
 def test_a_tuned_checkpoint_with_a_partial_token_state_is_refused(tmp_path):
-    from icrsumo.errors import InputError
+    from icrsumo.core.errors import InputError
     from icrsumo.learn import nets
 
     with pytest.raises(InputError, match="config.text_len: 400 is not a whole number of 384-value"):
@@ -159,7 +159,7 @@ def test_a_tuned_checkpoint_with_a_partial_token_state_is_refused(tmp_path):
 
 
 def test_a_minilm_config_with_another_text_len_is_refused(tmp_path):
-    from icrsumo.errors import InputError
+    from icrsumo.core.errors import InputError
     from icrsumo.learn.train import read_config
 
     cfg = tmp_path / "m.toml"

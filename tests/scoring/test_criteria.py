@@ -11,6 +11,7 @@ from __future__ import annotations
 import pytest
 from hand_logs import DT, ROUTE, lb2_log, make_log, straight  # tests/ is on pytest's pythonpath
 
+from icrsumo.core.types import Event
 from icrsumo.scoring import score_episode
 from icrsumo.scoring.criteria import (
     BLOCKED_S,
@@ -24,7 +25,6 @@ from icrsumo.scoring.criteria import (
 from icrsumo.scoring.lb1 import LB1, LB1_RULES
 from icrsumo.scoring.lb2 import LB2_RULES
 from icrsumo.scoring.route import DenseRoute
-from icrsumo.types import Event
 
 
 def lb1_monitor(log):

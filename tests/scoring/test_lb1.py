@@ -14,11 +14,11 @@ import pytest
 from hand_logs import ROUTE, contact, make_log, straight  # tests/ is on pytest's pythonpath
 from records_example import rec, tiny
 
-from icrsumo.fsio import dumps_json
+from icrsumo.core.fsio import dumps_json
+from icrsumo.core.types import EpisodeRecord, Event
 from icrsumo.scoring import score_episode
 from icrsumo.scoring.lb1 import LB1, counted_collisions, leaderboard_checkpoint
 from icrsumo.scoring.penalties import PENALTIES
-from icrsumo.types import EpisodeRecord, Event
 
 
 def test_penalty_constants():

@@ -3,6 +3,8 @@ third rule set is one module registered by name, no SUMO."""
 
 from __future__ import annotations
 
+import warnings
+
 import pytest
 from hand_logs import ROUTE, contact, make_log, straight  # tests/ is on pytest's pythonpath
 from records_example import rec
@@ -52,7 +54,9 @@ def test_a_third_rule_set_is_one_class_registered_by_name():
 
 
 def test_the_old_module_names_are_the_new_ones():
-    from icrsumo import metrics, termination
+    with warnings.catch_warnings():  # the warning itself: tests/test_imports.py
+        warnings.simplefilter("ignore", DeprecationWarning)
+        from icrsumo import metrics, termination
     from icrsumo.scoring.criteria import replay
     from icrsumo.scoring.route import DenseRoute
 

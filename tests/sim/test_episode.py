@@ -11,17 +11,17 @@ import pytest
 from icrsumo.agents.base import Action
 from icrsumo.agents.privileged import InstructionFollower, RouteOracle
 from icrsumo.agents.registry import make_agent
-from icrsumo.convert import ConvertOptions, convert_routes
-from icrsumo.dynamics import Control
-from icrsumo.errors import InputError
+from icrsumo.core.errors import InputError
+from icrsumo.core.resources import bundled_suites
+from icrsumo.core.types import TerminationClass
 from icrsumo.instructions.generate import GenerateOptions, generate
 from icrsumo.instructions.store import read_instruction_sets
-from icrsumo.logs import dumps_log
-from icrsumo.resources import bundled_suites
-from icrsumo.scenario import find_scenarios, read_scenario
+from icrsumo.results.logs import dumps_log
 from icrsumo.scoring import score_episode
 from icrsumo.sim.episode import run_episode
-from icrsumo.types import TerminationClass
+from icrsumo.world.convert import ConvertOptions, convert_routes
+from icrsumo.world.dynamics import Control
+from icrsumo.world.scenario import find_scenarios, read_scenario
 
 pytestmark = pytest.mark.sumo
 
@@ -122,7 +122,7 @@ def _all_red(sc, tls: str, n_links: int) -> str:
 
 
 def test_red_light_run_is_an_infraction_and_waiting_is_not(quiet):
-    from icrsumo.networks import load_net
+    from icrsumo.world.networks import load_net
 
     sc, sets = _load(quiet, "tiny", "tiny_000")  # straight across a signalised junction
     j = next(j for j in sc.route.junctions if j.junction_type == "traffic_light")
@@ -196,7 +196,7 @@ def test_agents_on_the_tiny_suite(converted, generated):
 
 
 def test_stop_sign_run_is_an_infraction_and_stopping_is_not(quiet):
-    from icrsumo.networks import load_net
+    from icrsumo.world.networks import load_net
 
     sc, sets = _load(quiet, "tiny", "tiny_014")  # a priority_stop junction on the route
     net = load_net(sc.net)
@@ -217,7 +217,7 @@ class Swerve(RouteOracle):
 
     def act(self, obs):
         from icrsumo.agents.base import Action
-        from icrsumo.dynamics import Control
+        from icrsumo.world.dynamics import Control
 
         return Action(control=Control(steer=1.0, throttle=0.4))
 

@@ -10,13 +10,13 @@ import cv2
 import numpy as np
 import pytest
 
-from icrsumo.control import WaypointController, WaypointPath, desired_speed, pursuit_point
-from icrsumo.dynamics import Control, EgoState, VehicleParams
-from icrsumo.networks import load_net
+from icrsumo.core.resources import bundled_towns
 from icrsumo.render import BevRenderer, BevSpec
-from icrsumo.resources import bundled_towns
+from icrsumo.sim.control import WaypointController, WaypointPath, desired_speed, pursuit_point
 from icrsumo.sim.drivable import drivable_area
 from icrsumo.sim.sensors import LaneHeading, footprint_corners, off_corners
+from icrsumo.world.dynamics import Control, EgoState, VehicleParams
+from icrsumo.world.networks import load_net
 
 
 # ----------------------------------------------------------------------------- references

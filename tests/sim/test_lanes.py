@@ -7,8 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from icrsumo.networks import load_net
-from icrsumo.resources import bundled_towns
+from icrsumo.core.resources import bundled_towns
 from icrsumo.sim.lanes import (
     ALLOWED_OUT_DISTANCE,
     DrivingLanes,
@@ -17,6 +16,7 @@ from icrsumo.sim.lanes import (
     driving_lanes,
     wrong_lane_step,
 )
+from icrsumo.world.networks import load_net
 
 
 @pytest.fixture(scope="module", params=["icr_grid", "Town03"])

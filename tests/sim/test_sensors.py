@@ -13,15 +13,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from icrsumo.dynamics import EgoState
-from icrsumo.networks import load_net
-from icrsumo.resources import bundled_towns
+from icrsumo.core.resources import bundled_towns
+from icrsumo.core.vocab import EventKind
 from icrsumo.scoring.criteria import OFF_LANES
 from icrsumo.sim.drivable import DrivableArea, drivable_area
 from icrsumo.sim.frame import Contact, SimFrame, frame_from_dict, frame_to_dict
 from icrsumo.sim.lanes import driving_lanes
 from icrsumo.sim.sensors import Sensors, SensorState
-from icrsumo.vocab import EventKind
+from icrsumo.world.dynamics import EgoState
+from icrsumo.world.networks import load_net
 
 FRAMES = Path(__file__).resolve().parents[1] / "data" / "frames"
 CASES = sorted(p.stem for p in FRAMES.glob("*.json"))

@@ -1,6 +1,6 @@
 """The local backend: worker processes on this machine (one SUMO each), fed one job at a time
 over a pipe, with a watchdog in the parent that kills and replaces a worker whose agent call (or
-guard call) overruns the timeout (:class:`~icrsumo.agents.watch.SlotWatch`) or that dies."""
+guard call) overruns the timeout (:class:`~icrsumo.agents.hosting.watch.SlotWatch`) or that dies."""
 
 from __future__ import annotations
 
@@ -13,10 +13,11 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
-from ...agents.watch import AGENT, SlotWatch, Unwatched, overran, overran_by, timeout_message
-from ...errors import raise_interrupted
-from ...procs import die_with_parent
-from ...vocab import ErrorKind
+from icrsumo.agents.hosting.watch import AGENT, SlotWatch, Unwatched, overran, overran_by, timeout_message
+from icrsumo.core.errors import raise_interrupted
+from icrsumo.core.procs import die_with_parent
+from icrsumo.core.vocab import ErrorKind
+
 from ..execute import EpisodeWorker, Outcome, row_guard
 from ..plan import Job
 
@@ -76,7 +77,7 @@ class _Process:
 
 
 def _run_in_process(jobs: list[Job]) -> Iterator[tuple[Job, Outcome]]:
-    """Run ``jobs`` here, one at a time. Ctrl-C raises :class:`~icrsumo.errors.Interrupted` while
+    """Run ``jobs`` here, one at a time. Ctrl-C raises :class:`~icrsumo.core.errors.Interrupted` while
     they run (from the main thread), so that a ``KeyboardInterrupt`` raised by agent code is told
     apart from the user's and stored as a crash."""
     main = threading.current_thread() is threading.main_thread()

@@ -1,6 +1,6 @@
 """The Ray backend: ``workers`` Ray actors (one CPU each, on this machine or on the cluster at
 ``address``), each an :class:`~icrsumo.evaluation.execute.EpisodeWorker` whose agent calls are
-interrupted by SIGALRM after the timeout (:class:`~icrsumo.agents.watch.AlarmWatch`: no
+interrupted by SIGALRM after the timeout (:class:`~icrsumo.agents.hosting.watch.AlarmWatch`: no
 parent watches them). An actor that dies is replaced; its episode is reported as crashed."""
 
 from __future__ import annotations
@@ -8,9 +8,10 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator
 
-from ...agents.watch import AlarmWatch
-from ...errors import Field, InputError
-from ...vocab import ErrorKind
+from icrsumo.agents.hosting.watch import AlarmWatch
+from icrsumo.core.errors import Field, InputError
+from icrsumo.core.vocab import ErrorKind
+
 from ..execute import EpisodeWorker, Outcome
 from ..plan import Job
 

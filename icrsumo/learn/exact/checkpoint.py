@@ -6,7 +6,7 @@ name, the model config and the provenance (``meta``).
 Reading checks everything the graph relies on: the format, the config, every array's name,
 shape and dtype (no missing or extra array), finite constants, and that no product can leave
 float32's exact integers (``max|x| * sum|w| + |b| < 2**24`` per output channel). A file that
-fails is an :class:`icrsumo.errors.InputError` naming it and the array.
+fails is an :class:`icrsumo.core.errors.InputError` naming it and the array.
 """
 
 from __future__ import annotations
@@ -19,8 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import InputError
-from ...fsio import unreadable, write_atomic
+from icrsumo.core.errors import InputError
+from icrsumo.core.fsio import unreadable, write_atomic
+
 from ..config import ModelConfig, config_dict, config_from_dict, short_repr
 from ..labels import ARC_M
 from .graph import EXACT_LIMIT, SMAX, TABLE_HALF, UMAX

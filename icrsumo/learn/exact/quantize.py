@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import InputError
+from icrsumo.core.errors import InputError
+
 from ..labels import ARC_M
 from .checkpoint import SUFFIX, ExactCheckpoint, bounds, check_arrays, layout, save
 from .graph import EXACT_LIMIT, HIDDEN_BITS, LMAX, SMAX, TABLE_HALF, TABLE_STEP, UMAX

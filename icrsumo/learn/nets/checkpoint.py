@@ -4,7 +4,7 @@ checkpoint :func:`export` writes and the training state ``OUT/last.pt``.
 Checkpoints are plain dicts of tensors, strings and numbers, read with
 ``torch.load(..., weights_only=True)``; a file that is missing, empty, truncated, not a torch
 file, refused by that safe loader, or whose weights do not fit its model config is an
-:class:`icrsumo.errors.InputError` naming the file (:func:`load`, :func:`read_checkpoint`).
+:class:`icrsumo.core.errors.InputError` naming the file (:func:`load`, :func:`read_checkpoint`).
 """
 
 from __future__ import annotations
@@ -16,8 +16,9 @@ from typing import TYPE_CHECKING
 
 import torch
 
-from ...errors import InputError, expect
-from ...fsio import unreadable
+from icrsumo.core.errors import InputError, expect
+from icrsumo.core.fsio import unreadable
+
 from ..config import _CHECKPOINT_FIX, ModelConfig, config_from_dict
 from ..config import config_dict as _cfg_dict
 from ..config import short_repr as _short

@@ -23,8 +23,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ...errors import InputError, expect
-from ...vocab import Intent
+from icrsumo.core.errors import InputError, expect
+from icrsumo.core.vocab import Intent
+
 from ..config import MINILM_SHAPE, ModelConfig
 from ..labels import ARC_M, STOP_BELOW
 
@@ -245,9 +246,9 @@ def losses(out: dict[str, torch.Tensor], batch: dict[str, torch.Tensor]) -> dict
 
 def pick_device(name: str = "auto", file: object = "device", place: str = "") -> torch.device:
     """``auto``: CUDA when available, else CPU; ``cpu``, ``cuda`` or ``cuda:N``. A device that
-    is unknown or not on this machine (:func:`icrsumo.devices.check_device`) is an InputError
+    is unknown or not on this machine (:func:`icrsumo.core.devices.check_device`) is an InputError
     naming ``file`` and ``place`` (the config key or the command-line option it came from)."""
-    from ...devices import check_device
+    from icrsumo.core.devices import check_device
 
     expect(name, str, file, place, "the device", "use cpu, cuda, cuda:N or auto")
     try:

@@ -9,7 +9,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from ...errors import InputError
+from icrsumo.core.errors import InputError
+
 from ..config import short_repr as _short
 from .checkpoint import read_checkpoint
 from .models import BevLanguageNet, pick_device

@@ -10,7 +10,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from ...errors import Field, InputError, expect
+from icrsumo.core.errors import Field, InputError, expect
+
 from ..config import ModelConfig
 from ..config import config_dict as _cfg_dict
 from ..config import short_repr as _short

@@ -1,0 +1,69 @@
+"""guard.json's numbers from stored records (pure): block rates, Δ with and without the guard,
+the shrink of the misleading Δ, flips prevented and caused, the paired loss test, the targets."""
+
+from __future__ import annotations
+
+from icrsumo.core.types import EpisodeRecord
+from icrsumo.core.vocab import EpisodeStatus
+from icrsumo.guards.text import TextGuard
+from icrsumo.instructions.banks import load_banks
+from icrsumo.reporting.guard import guard_markdown
+from icrsumo.results.aggregate import summarize
+from icrsumo.results.guards import guard_doc, split_row, template_number, text_holdout
+
+
+def rec(agent, route, family, k, ds, checked=0, blocked=0):
+    done = ds == 100.0
+    return EpisodeRecord(agent, route, family, k, 1, EpisodeStatus.DONE, ds=ds, rc=ds, is_=1.0,
+                         termination="route_completed" if done else "route_deviation",
+                         termination_class="done" if done else "RD", guard_checked=checked,
+                         guard_blocked=blocked)
+
+
+def records():
+    out = []
+    for r in ("r1", "r2", "r3", "r4"):
+        out += [rec("a", r, "baseline", 0, 100.0), rec("a+guard:plan", r, "baseline", 0, 100.0, 2, 0)]
+        for k in (0, 1):
+            out += [rec("a", r, "misleading", k, 40.0), rec("a+guard:plan", r, "misleading", k, 100.0, 2, 2),
+                    rec("a", r, "paraphrase", k, 100.0),
+                    rec("a+guard:plan", r, "paraphrase", k, 100.0 if (r, k) != ("r1", 0) else 40.0, 2,
+                        int((r, k) == ("r1", 0)))]
+    return out
+
+
+def test_rows_block_rates_shrink_flips_and_targets():
+    recs = records()
+    summary = summarize(recs, suite="t", seed=1, k=2, families=("paraphrase", "misleading"))
+    doc = guard_doc(summary, recs)
+    row = doc["rows"]["a+guard:plan"]
+    assert (row["agent"], row["guard"], row["unguarded_in_run"]) == ("a", "plan", True)
+    mis, para = row["families"]["misleading"], row["families"]["paraphrase"]
+    assert (mis["checked"], mis["blocked"], mis["block_rate"]) == (16, 16, 1.0)
+    assert mis["guarded"]["dDS"] == 0.0 and mis["unguarded"]["dDS"] == -60.0 and mis["dDS_shrink"] == 1.0
+    assert mis["flips"] == {"prevented": 8, "caused": 0} and mis["loss"]["mean_dDS_vs_unguarded"] == 60.0
+    assert para["block_rate"] == 0.0625 and para["flips"] == {"prevented": 0, "caused": 1}
+    assert para["loss"]["mean_dDS_vs_unguarded"] == -7.5 and not para["loss"]["significant_loss"]  # 1 route
+    g = doc["guards"]["plan"]
+    assert g["detection"] == 1.0 and g["false_blocks"] == round(1 / 24, 4)
+    t = g["targets"]
+    assert t["detection"]["met"] and not t["false_blocks"]["met"] and t["dDS_shrink"]["met"]
+    assert t["no_significant_loss"]["met"]
+    md = guard_markdown(doc)
+    assert "| plan | 100.0 % | 4.2 % |" in md and "| misleading | 16/16 (100.0 %) |" in md
+    assert guard_doc(summarize([r for r in recs if r.agent == "a"], suite="t", seed=1, k=2,
+                               families=("misleading",)), recs) is None
+
+
+def test_names_and_template_numbers():
+    assert split_row("bev+guard:plan") == ("bev", "plan") and split_row("bev") is None
+    assert split_row("x+guard:y+guard:z") == ("x+guard:y", "z")
+    assert template_number("M.left.p07") == 7 and template_number("keep") is None
+
+
+def test_the_text_guard_is_reported_on_the_templates_it_was_not_written_from():
+    doc = text_holdout(TextGuard(), load_banks())
+    assert doc["tuning"]["templates"] == doc["held_out"]["templates"] == 96
+    assert doc["tuning"]["detection"] == 1.0           # its cues were written from these
+    assert 0.5 <= doc["held_out"]["detection"] <= 1.0  # the finding (0.75 when written)
+    assert doc["paraphrase_bank"]["block_rate"] == 0.0
