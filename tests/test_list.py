@@ -7,7 +7,7 @@ import pytest
 from icrsumo.agents.registry import DEFAULT_AGENT, REGISTRY
 from icrsumo.app.cli.main import main
 from icrsumo.core.resources import bundled_suites
-from icrsumo.core.vocab import ALL_FAMILIES, CONTROL_FAMILIES, FAMILY_DESCRIPTIONS, Family
+from icrsumo.core.vocab import ALL_FAMILIES, CONTROL_FAMILIES, DELIVERY_FAMILIES, FAMILY_DESCRIPTIONS, Family
 
 
 def _lines(capsys, *argv):
@@ -29,7 +29,8 @@ def test_suites_agents_and_families_come_from_the_registries(capsys):
 def test_each_family_is_listed_once_with_its_kind_and_description(capsys):
     for line in _lines(capsys, "families"):
         name, kind, description = line.split(maxsplit=2)
-        assert kind == ("control" if Family(name) in CONTROL_FAMILIES else "default")
+        assert kind == ("control" if Family(name) in CONTROL_FAMILIES else
+                        "delivery" if Family(name) in DELIVERY_FAMILIES else "default")
         assert description == FAMILY_DESCRIPTIONS[Family(name)] and "control" not in description
 
 

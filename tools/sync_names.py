@@ -54,13 +54,14 @@ def inline_names() -> dict[str, str]:
     """Inline span key -> its Markdown, from the installed package's registries."""
     from icrsumo.agents.registry import DEFAULT_AGENT, REGISTRY
     from icrsumo.core.resources import bundled_suites
-    from icrsumo.core.vocab import CONTROL_FAMILIES, FAMILIES
+    from icrsumo.core.vocab import CONTROL_FAMILIES, DELIVERY_FAMILIES, FAMILIES
 
     def code(items) -> str:
         return ", ".join(f"`{x}`" for x in items)
 
     return {"default_agent": f"`{DEFAULT_AGENT}`", "suites": code(bundled_suites()),
-            "families": code(FAMILIES), "control_families": code(CONTROL_FAMILIES), "agents": code(REGISTRY)}
+            "families": code(FAMILIES), "control_families": code(CONTROL_FAMILIES),
+            "delivery_families": code(DELIVERY_FAMILIES), "agents": code(REGISTRY)}
 
 
 def synced_page(text: str, where: str = "page") -> str:

@@ -28,7 +28,9 @@ if TYPE_CHECKING:
 @dataclass(frozen=True)
 class EpisodeInfo:
     """What an agent learns at reset: route id, town, network path (the map is public; the
-    route is not), simulation and control step (s), and a seed for stochastic agents."""
+    route is not), simulation and control step (s), a seed for stochastic agents, and
+    ``asking``: whether the navigator answers the agent's asks in this episode
+    (:attr:`Action.ask`; off unless the run turns it on)."""
 
     route_id: str
     town: str
@@ -36,6 +38,7 @@ class EpisodeInfo:
     step_length: float
     control_dt: float
     seed: int
+    asking: bool = False
 
 
 @dataclass(frozen=True)
@@ -65,7 +68,9 @@ class Observation:
     """What an agent sees at time ``t`` (s): ``bev`` (C, H, W) uint8 raster (channels in
     ``icrsumo.render.CHANNELS``, heading up), ``speed`` (m/s), the active ``instruction``
     text with placeholders filled (and its id, -1 before the first), and the active
-    ``notice`` ("" if none). ``world`` is set only for privileged agents."""
+    ``notice`` ("" if none). ``world`` is set only for privileged agents. ``answer``: the
+    instruction is the navigator's answer to the agent's ask (its id then that of the baseline
+    instruction it quotes), shown from its arrival until the next instruction is triggered."""
 
     t: float
     bev: np.ndarray
@@ -74,16 +79,21 @@ class Observation:
     instruction_id: int
     notice: str
     world: World | None = None
+    answer: bool = False
 
 
 @dataclass(frozen=True)
 class Action:
     """An agent's output: ``control`` (low-level), or ``waypoints`` ((N, 2) m, ego frame, x
-    forward, y left, 0.5 s apart) with an optional ``target_speed`` (m/s) for the controller."""
+    forward, y left, 0.5 s apart) with an optional ``target_speed`` (m/s) for the controller.
+    ``ask``: ask the navigator for clarification (used only when :attr:`EpisodeInfo.asking` is
+    on: it answers with the route's next maneuver after a delay, at most once per maneuver,
+    and counts every ask; see :mod:`icrsumo.sim.asking`)."""
 
     control: Control | None = None
     waypoints: np.ndarray | None = None
     target_speed: float | None = None
+    ask: bool = False
 
 
 @runtime_checkable
@@ -144,6 +154,8 @@ def validate_action(action: object) -> Action:
         raise AgentError(f"act() returned {type(action).__name__}, expected icrsumo.agents.base.Action")
     if action.control is None and action.waypoints is None:
         raise AgentError("act() returned an Action with neither control nor waypoints")
+    if not isinstance(action.ask, (bool, np.bool_)):
+        raise AgentError(f"Action.ask must be True or False, got {action.ask!r}"[:160])
     if action.control is not None:
         c = action.control
         values = (c.steer, c.throttle, c.brake)

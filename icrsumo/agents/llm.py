@@ -18,6 +18,10 @@ branches, traffic-light state, gap to the vehicle ahead), and asks for JSON
 OpenAI API and vLLM take it, ``none`` sends none). Any other answer is an *invalid answer*: the
 agent follows its lane, and the episode counts it. ``stop`` brings the car to a standstill for
 :data:`STOP_HOLD_S`, after which it follows the road. Temperature 0 and a fixed seed are sent.
+When the run has asking on, the menu also offers ``ask`` (:data:`SYSTEM_ASKING`,
+:data:`SCHEMA_ASKING`): the agent then asks the navigator (:mod:`icrsumo.sim.asking`) as the
+instruction-follower does for an instruction it cannot place, and the exchange is stored with
+maneuver ``unknown``.
 
 Every exchange is stored with the episode (:class:`icrsumo.core.types.ModelCall` in its log) and
 in a content-addressed response cache (``OUT/llm-cache``, key: SHA-256 of the exact request,
@@ -64,6 +68,7 @@ from icrsumo.core.types import Intent, ModelCall
 from .base import Action, AgentError, EpisodeInfo, Observation, World
 from .driver import lane_edge, lane_index
 from .llm_request import (
+    ASK,
     FORMATS,
     LLM_PREFIX,
     LOOK_M,
@@ -71,7 +76,9 @@ from .llm_request import (
     MENU,
     PROMPT_VERSION,
     SCHEMA,
+    SCHEMA_ASKING,
     SYSTEM,
+    SYSTEM_ASKING,
     Answer,
     LLMSettings,
     Scene,
@@ -90,8 +97,9 @@ from .privileged import InstructionFollower
 __all__ = [
     "ASK_M", "Asker", "LEAD_HALF_WIDTH", "LEAD_M", "LLMFactory", "LLMFollower", "LOGGED_ANSWER",
     "MAX_ANSWER_BYTES", "RETRIES", "RETRY_BACKOFF", "STANDING", "STOP_HOLD_S", "bound",
-    "check_server", "llm_factory", "FORMATS", "LLM_PREFIX", "LOOK_M", "MAX_TOKENS", "MENU",
-    "PROMPT_VERSION", "SCHEMA", "SYSTEM", "Answer", "LLMSettings", "Scene", "answer_of",
+    "check_server", "llm_factory", "ASK", "FORMATS", "LLM_PREFIX", "LOOK_M", "MAX_TOKENS", "MENU",
+    "PROMPT_VERSION", "SCHEMA", "SCHEMA_ASKING", "SYSTEM", "SYSTEM_ASKING", "Answer", "LLMSettings", "Scene",
+    "answer_of",
     "api_key", "build_request", "parse_answer", "parse_spec", "user_message", "with_format",
     "with_options",
 ]
@@ -138,10 +146,10 @@ class Asker:
     def __post_init__(self) -> None:
         self.cache = ResponseCache(self.settings.cache_dir) if self.settings.cache_dir is not None else None
 
-    def ask(self, body: dict) -> tuple[str, Answer]:
-        """(cache key, answer) of the request ``body``."""
+    def ask(self, body: dict, asking: bool = False) -> tuple[str, Answer]:
+        """(cache key, answer) of the request ``body`` (``asking``: :data:`ASK` is an answer)."""
         key, rec = self.record(body)
-        return key, answer_of(rec)
+        return key, answer_of(rec, asking)
 
     def record(self, body: dict) -> tuple[str, dict]:
         """(cache key, cache record: the answer's ``content``) of the request ``body``."""
@@ -194,7 +202,7 @@ class LLMFollower(InstructionFollower):
         self.name = settings.name
         self.asker = Asker(settings, api_key(settings))
         self.calls: list[ModelCall] = []
-        self._asked: set[tuple[int, str]] = set()
+        self._asked: set[tuple[tuple[int, bool], str]] = set()
         self._stop_since: float | None = None   # s: when the car came to a standstill after "stop"
         self._stopping = False
 
@@ -228,7 +236,7 @@ class LLMFollower(InstructionFollower):
         return self._ask(obs, "instruction")
 
     def observe(self, obs: Observation) -> None:
-        changed = obs.instruction_id != self._instr_id
+        changed = (obs.instruction_id, obs.answer) != self._instr_id
         super().observe(obs)   # asks when the instruction changed
         w = obs.world
         if w is None or obs.instruction_id < 0 or not w.lane or w.lane.startswith(":"):
@@ -236,12 +244,12 @@ class LLMFollower(InstructionFollower):
         edge = lane_edge(w.lane)
         options = self._options(edge)
         ahead = self.net.lane_length.get(w.lane, 0.0) - w.lane_pos
-        if len(options) < 2 or ahead > ASK_M or (obs.instruction_id, edge) in self._asked:
+        if len(options) < 2 or ahead > ASK_M or (self._instr_id, edge) in self._asked:
             return
-        self._asked.add((obs.instruction_id, edge))
+        self._asked.add((self._instr_id, edge))
         if changed:   # just asked, with this junction in the scene
             return
-        intent = self._ask(obs, "junction")
+        intent = self.placed(self._ask(obs, "junction"), obs)
         if intent != self.intent:
             self.intent = intent
             self._decided.pop(edge, None)
@@ -251,8 +259,8 @@ class LLMFollower(InstructionFollower):
     def _ask(self, obs: Observation, at: str) -> Intent:
         scene = self.scene(obs)
         png = self._png(obs) if self.settings.image else None
-        body = build_request(self.settings, obs.instruction, scene, png)
-        key, answer = self.asker.ask(body)
+        body = build_request(self.settings, obs.instruction, scene, png, self.asking)
+        key, answer = self.asker.ask(body, self.asking)
         self.calls.append(ModelCall(
             t=round(float(obs.t), 3), instruction_id=int(obs.instruction_id), at=at, key=key,
             prompt=user_message(obs.instruction, scene), answer=answer.text[:LOGGED_ANSWER],

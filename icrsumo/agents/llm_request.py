@@ -34,19 +34,30 @@ MAX_TOKENS = 32
 #: changes whenever the prompt's wording changes (part of the agent's fingerprint)
 PROMPT_VERSION = "1"
 
+_MANEUVERS = (
+    "Maneuvers: follow = keep following the current road; left = turn left at the next "
+    "junction; right = turn right at the next junction; straight = go straight through the "
+    "next junction; lane_left = change one lane to the left; lane_right = change one lane to "
+    "the right; stop = stop the car now"
+)
 SYSTEM = (
     "You are the language module of a self-driving car. The car steers, keeps its lane, keeps "
     "its distance and obeys traffic lights by itself. Your only job is to read the instruction "
     "it was given and choose the maneuver to make now or at the next junction.\n"
-    "Maneuvers: follow = keep following the current road; left = turn left at the next "
-    "junction; right = turn right at the next junction; straight = go straight through the "
-    "next junction; lane_left = change one lane to the left; lane_right = change one lane to "
-    "the right; stop = stop the car now.\n"
+    f"{_MANEUVERS}.\n"
     'Answer with one JSON object and nothing else: {"maneuver": "<one of follow, left, right, '
     'straight, lane_left, lane_right, stop>"}.'
 )
 SCHEMA = {"type": "object", "properties": {"maneuver": {"type": "string", "enum": [m.value for m in MENU]}},
           "required": ["maneuver"], "additionalProperties": False}
+#: the answer that asks the navigator for clarification (offered only when the run has asking on)
+ASK = "ask"
+#: the system prompt and schema with asking on: :data:`SYSTEM` and :data:`SCHEMA` with :data:`ASK`
+SYSTEM_ASKING = SYSTEM.replace(
+    f"{_MANEUVERS}.", f"{_MANEUVERS}; ask = the instruction does not say which maneuver: ask the "
+    "navigator, who answers with the next maneuver in a moment.").replace("stop>", "stop, ask>")
+SCHEMA_ASKING = {**SCHEMA,
+                 "properties": {"maneuver": {"type": "string", "enum": [*(m.value for m in MENU), ASK]}}}
 
 
 # --------------------------------------------------------------------------- settings and spec
@@ -179,8 +190,10 @@ def user_message(instruction: str, scene: Scene) -> str:
     return f"Instruction: {said}\nScene: {scene.text()}.\nWhich maneuver?"
 
 
-def build_request(s: LLMSettings, instruction: str, scene: Scene, png: bytes | None = None) -> dict:
-    """The chat-completions request body for one question."""
+def build_request(s: LLMSettings, instruction: str, scene: Scene, png: bytes | None = None,
+                  asking: bool = False) -> dict:
+    """The chat-completions request body for one question; ``asking``: the model may answer
+    :data:`ASK` (:data:`SYSTEM_ASKING`, :data:`SCHEMA_ASKING`)."""
     text = user_message(instruction, scene)
     content: Any = text
     if png is not None:
@@ -189,12 +202,13 @@ def build_request(s: LLMSettings, instruction: str, scene: Scene, png: bytes | N
                                                        + base64.b64encode(png).decode("ascii")}}]
     body: dict[str, Any] = {
         "model": s.model,
-        "messages": [{"role": "system", "content": SYSTEM}, {"role": "user", "content": content}],
+        "messages": [{"role": "system", "content": SYSTEM_ASKING if asking else SYSTEM},
+                     {"role": "user", "content": content}],
         "temperature": 0,
         "seed": s.seed,
         "max_tokens": MAX_TOKENS,
     }
-    return with_format(body, s.format, "maneuver", SCHEMA)
+    return with_format(body, s.format, "maneuver", SCHEMA_ASKING if asking else SCHEMA)
 
 
 def with_format(body: dict, fmt: str, name: str, schema: dict) -> dict:
@@ -211,9 +225,10 @@ def with_format(body: dict, fmt: str, name: str, schema: dict) -> dict:
 _FENCE = re.compile(r"```[ \t]*(?:json|JSON)?[ \t]*\r?\n?(.*?)```", re.DOTALL)
 
 
-def parse_answer(content: str) -> Intent:
+def parse_answer(content: str, asking: bool = False) -> Intent:
     """The maneuver of an answer text: a JSON object (bare or in a ```json fence) whose
-    ``maneuver`` is one of :data:`MENU`; :class:`Invalid` saying what is wrong otherwise."""
+    ``maneuver`` is one of :data:`MENU` (or, with ``asking``, :data:`ASK`: the intent is then
+    unknown, and the agent asks the navigator); :class:`Invalid` saying what is wrong otherwise."""
     text = content.strip()
     if not text:
         raise Invalid(["answer is empty"])
@@ -230,7 +245,7 @@ def parse_answer(content: str) -> Intent:
     if not isinstance(obj, dict) or "maneuver" not in obj:
         raise Invalid(['answer is not a JSON object with key "maneuver"'])
     value = obj["maneuver"]
-    menu = {m.value: m for m in MENU}
+    menu = {m.value: m for m in MENU} | ({ASK: Intent.UNKNOWN} if asking else {})
     if not isinstance(value, str) or value.strip().lower() not in menu:
         raise Invalid([f"maneuver {str(value)[:40]!r} is not on the menu"])
     return menu[value.strip().lower()]
@@ -238,8 +253,9 @@ def parse_answer(content: str) -> Intent:
 
 @dataclass(frozen=True)
 class Answer:
-    """A model's answer to one request: the ``maneuver`` (follow when invalid), ``valid``, the
-    answer ``text`` ("" when the model said nothing) and the ``problem`` of an invalid one."""
+    """A model's answer to one request: the ``maneuver`` (follow when invalid; unknown for
+    :data:`ASK`), ``valid``, the answer ``text`` ("" when the model said nothing) and the
+    ``problem`` of an invalid one."""
 
     maneuver: Intent
     valid: bool
@@ -247,10 +263,11 @@ class Answer:
     problem: str = ""
 
 
-def answer_of(record: dict) -> Answer:
-    """The :class:`Answer` of a cache record (its ``content``: the model's answer text)."""
+def answer_of(record: dict, asking: bool = False) -> Answer:
+    """The :class:`Answer` of a cache record (its ``content``: the model's answer text);
+    ``asking``: :data:`ASK` is an answer."""
     content = str(record["content"])
     try:
-        return Answer(parse_answer(content), True, content)
+        return Answer(parse_answer(content, asking), True, content)
     except Invalid as err:
         return Answer(Intent.FOLLOW, False, content, err.summary)

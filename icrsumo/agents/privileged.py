@@ -11,7 +11,10 @@ how they choose the next edge at a junction:
   intent classifier and takes the branch it names at the next junction (left / right /
   straight; roundabout exit 1 = right, 2 = straight, 3 = left; highway exit = right), changes
   lane when told, and otherwise (follow, unclear) keeps the current road: straight where
-  possible, else the only way on, else right.
+  possible, else the only way on, else right. With asking on (``EpisodeInfo.asking``) it asks
+  the navigator (``Action.ask``) when it cannot place the intent of a new instruction (unknown,
+  or an empty text), unless the navigator's last answer is a junction maneuver it has not yet
+  driven: that answer then stands for the unclear instruction.
 
 :class:`~icrsumo.agents.driver.PathDriver` (the lane path) and
 :class:`~icrsumo.agents.speed.SpeedPolicy` (the speed) are the driving they share; their names
@@ -22,11 +25,12 @@ import them from those modules.
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 
 from icrsumo.core.types import Intent
 from icrsumo.instructions.intent import classify_intent
 
-from .base import EpisodeInfo, Observation, World
+from .base import Action, EpisodeInfo, Observation, World
 from .driver import (
     CHANGE_GAP_TIME,
     CHANGE_LOOK_BEHIND,
@@ -120,6 +124,8 @@ class RouteOracle(PathDriver):
 
 #: words that name a roundabout in an instruction
 _RING_WORDS = re.compile(r"roundabout|traffic circle|rotary|\bcircle\b", re.IGNORECASE)
+#: the navigator's answers that are held until driven (junction maneuvers)
+_HELD = (Intent.LEFT, Intent.RIGHT, Intent.STRAIGHT)
 
 
 class InstructionFollower(PathDriver):
@@ -130,8 +136,14 @@ class InstructionFollower(PathDriver):
     def __init__(self) -> None:
         super().__init__()
         self.intent = Intent.FOLLOW
-        self._instr_id = -1
-        self._lane_done: set[int] = set()
+        # the instruction read last: (id, whether it was the navigator's answer)
+        self._instr_id: tuple[int, bool] = (-1, False)
+        # asking: whether the navigator answers asks; ask with this step's action; the
+        # navigator's last junction answer not yet driven
+        self.asking = False
+        self._ask_now = False
+        self._held: Intent | None = None
+        self._lane_done: set[tuple[int, bool]] = set()
         # the lane (edge, index) the active lane-change instruction asks for, and the one an
         # earlier unfinished lane-change instruction asked for (consecutive instructions add up)
         self._lane_goal: tuple[str, int] | None = None
@@ -146,20 +158,28 @@ class InstructionFollower(PathDriver):
     def reset(self, info: EpisodeInfo) -> None:
         super().reset(info)
         self.intent = Intent.FOLLOW
-        self._instr_id = -1
+        self._instr_id = (-1, False)
+        self.asking = bool(getattr(info, "asking", False))
+        self._ask_now = False
+        self._held = None
         self._lane_done = set()
         self._lane_goal = self._lane_carry = None
         self._ring_named = False
         self._ring_exits = 0
         self._spent = None
 
+    def act(self, obs: Observation) -> Action:
+        self._ask_now = False
+        action = super().act(obs)
+        return replace(action, ask=True) if self._ask_now else action
+
     def observe(self, obs: Observation) -> None:
-        if obs.instruction_id != self._instr_id:
+        if (obs.instruction_id, obs.answer) != self._instr_id:
             unfinished = self._lane_goal is not None and self._instr_id not in self._lane_done
             self._lane_carry = self._lane_goal if unfinished else None
             self._lane_goal = None
-            self._instr_id = obs.instruction_id
-            self.intent = self.interpret(obs)
+            self._instr_id = (obs.instruction_id, obs.answer)
+            self.intent = self.placed(self.interpret(obs), obs)
             self._ring_named = bool(_RING_WORDS.search(obs.instruction or ""))
             self._spent = None
             # a new instruction before a junction is entered may name another branch there:
@@ -171,6 +191,23 @@ class InstructionFollower(PathDriver):
                 self._decided.pop(self.net.via_edges.get(lane, ("", ""))[1], None)
             elif lane:
                 self._decided.pop(lane_edge(lane), None)
+
+    def placed(self, intent: Intent, obs: Observation) -> Intent:
+        """The intent to drive by when ``obs``'s instruction reads as ``intent``: itself, unless
+        asking is on and it is unclear (unknown, or an empty text): then the navigator's last
+        junction answer not yet driven, else ``intent`` and an ask with this step's action."""
+        if obs.answer:
+            self._held = intent if intent in _HELD else None
+            return intent
+        if intent is not Intent.UNKNOWN and obs.instruction:
+            self._held = None   # a clear instruction supersedes the navigator's answer
+            return intent
+        if not (self.asking and obs.instruction_id >= 0):
+            return intent
+        if self._held is not None:
+            return self._held
+        self._ask_now = True
+        return intent
 
     def interpret(self, obs: Observation) -> Intent:
         """The maneuver the new active instruction asks for: the ``rules`` interpreter (the
@@ -215,7 +252,7 @@ class InstructionFollower(PathDriver):
             if exits and (self._ring_exits + 1 >= target or not on_ring):
                 if not tentative:
                     self._ring_exits = 0
-                    self._spent = edge
+                    self._commit(edge)
                 return exits[0]
             if exits and not tentative:
                 self._ring_exits += 1
@@ -227,10 +264,16 @@ class InstructionFollower(PathDriver):
                 for o in options:
                     if d in dirs[o]:
                         if not tentative and not any(n in ring for n in (o, *options)):
-                            self._spent = edge
+                            self._commit(edge)
                         return o
         for d in ("s", "L", "R", "r", "l"):
             for o in options:
                 if d in dirs[o]:
                     return o
         return options[0]
+
+    def _commit(self, edge: str) -> None:
+        """The junction maneuver at the end of ``edge`` is committed to: the instruction (and a
+        navigator's answer held for it) is used up beyond it."""
+        self._spent = edge
+        self._held = None

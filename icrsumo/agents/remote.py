@@ -22,6 +22,12 @@ request                body                                        answer (200)
 ``POST /close``        ``session``                                 ``{}``: the session's agent is dropped
 =====================  ==========================================  ==================================
 
+Asking for clarification travels as three optional booleans, sent only when true, so that
+messages without them are those of before and either side may be older: ``info.asking`` (the
+navigator answers asks in this episode), ``obs.answer`` (the instruction is the navigator's
+answer) and ``action.ask`` (the agent asks). A peer that does not know them ignores them (an
+agent behind an older server never asks; an older client never answers).
+
 Any other status carries ``{"error": "..."}`` in plain words (400 malformed request, 404
 unknown path or session, 422 the agent's action broke the protocol, 500 the agent raised). The
 client turns every failure into one line: :class:`AgentTimeout` ("agent did not answer within
@@ -116,8 +122,19 @@ def _string(v: Any, what: str) -> str:
     return v
 
 
+def _flag(d: dict, key: str, what: str) -> bool:
+    """The optional boolean ``d[key]`` (false when absent); ProtocolError naming ``what``."""
+    v = d.get(key, False)
+    if not isinstance(v, bool):
+        raise ProtocolError(f"{what} must be true or false, got {type(v).__name__}")
+    return v
+
+
 def encode_info(info: EpisodeInfo) -> dict[str, Any]:
-    return asdict(info)
+    d = asdict(info)
+    if not d["asking"]:
+        del d["asking"]   # sent only when true: the message of a run without asking is unchanged
+    return d
 
 
 def decode_info(d: Any) -> EpisodeInfo:
@@ -129,14 +146,16 @@ def decode_info(d: Any) -> EpisodeInfo:
                            net=_string(d["net"], "info.net"),
                            step_length=_number(d["step_length"], "info.step_length"),
                            control_dt=_number(d["control_dt"], "info.control_dt"),
-                           seed=int(_number(d["seed"], "info.seed")))
+                           seed=int(_number(d["seed"], "info.seed")),
+                           asking=_flag(d, "asking", "info.asking"))
     except KeyError as err:
         raise ProtocolError(f"info lacks {err.args[0]}") from None
 
 
 def encode_obs(obs: Observation) -> dict[str, Any]:
     return {"t": float(obs.t), "bev": encode_array(obs.bev), "speed": float(obs.speed),
-            "instruction": obs.instruction, "instruction_id": int(obs.instruction_id), "notice": obs.notice}
+            "instruction": obs.instruction, "instruction_id": int(obs.instruction_id), "notice": obs.notice,
+            **({"answer": True} if obs.answer else {})}
 
 
 def decode_obs(d: Any) -> Observation:
@@ -149,24 +168,27 @@ def decode_obs(d: Any) -> Observation:
         return Observation(t=_number(d["t"], "obs.t"), bev=decode_array(d["bev"], "obs.bev"),
                            speed=_number(d["speed"], "obs.speed"),
                            instruction=_string(d["instruction"], "obs.instruction"), instruction_id=iid,
-                           notice=_string(d["notice"], "obs.notice"))
+                           notice=_string(d["notice"], "obs.notice"), answer=_flag(d, "answer", "obs.answer"))
     except KeyError as err:
         raise ProtocolError(f"obs lacks {err.args[0]}") from None
 
 
 def encode_action(action: Action) -> dict[str, Any]:
-    """A validated action on the wire."""
+    """A validated action on the wire (``ask`` only when true)."""
+    ask = {"ask": True} if action.ask else {}
     if action.control is not None:
         c = action.control
-        return {"control": {"steer": float(c.steer), "throttle": float(c.throttle), "brake": float(c.brake)}}
+        return {"control": {"steer": float(c.steer), "throttle": float(c.throttle), "brake": float(c.brake)},
+                **ask}
     ts = action.target_speed
     return {"waypoints": encode_array(np.asarray(action.waypoints)),
-            "target_speed": None if ts is None else float(ts)}
+            "target_speed": None if ts is None else float(ts), **ask}
 
 
 def decode_action(d: Any) -> Action:
     if not isinstance(d, dict) or ("control" in d) == ("waypoints" in d):
         raise ProtocolError("action must be an object with exactly one of control or waypoints")
+    ask = _flag(d, "ask", "action.ask")
     if "control" in d:
         c = d["control"]
         if not isinstance(c, dict):
@@ -174,12 +196,12 @@ def decode_action(d: Any) -> Action:
         try:
             return Action(control=Control(steer=_number(c["steer"], "control.steer"),
                                           throttle=_number(c["throttle"], "control.throttle"),
-                                          brake=_number(c["brake"], "control.brake")))
+                                          brake=_number(c["brake"], "control.brake")), ask=ask)
         except KeyError as err:
             raise ProtocolError(f"action.control lacks {err.args[0]}") from None
     ts = d.get("target_speed")
     return Action(waypoints=decode_array(d["waypoints"], "action.waypoints"),
-                  target_speed=None if ts is None else _number(ts, "action.target_speed"))
+                  target_speed=None if ts is None else _number(ts, "action.target_speed"), ask=ask)
 
 
 def message(**fields: Any) -> bytes:

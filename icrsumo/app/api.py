@@ -87,7 +87,8 @@ def evaluate(suite: str | Path = "tiny", agents: str | Sequence[str] | None = No
     rules, part of the folder's configuration), ``replace_agents`` (names whose stored episodes
     another agent of that name drove are deleted and run again), ``retry_crashed``, ``guards``
     (instruction guards, e.g. ``"plan"`` or ``["text", "plan"]``: every agent also runs behind each,
-    as its own rows ``AGENT+guard:NAME``; :mod:`icrsumo.guards`).
+    as its own rows ``AGENT+guard:NAME``; :mod:`icrsumo.guards`), ``asking`` (the navigator answers
+    agents' asks for clarification, :mod:`icrsumo.sim.asking`; part of the folder's configuration).
 
     Returns an :class:`icrsumo.evaluation.EvalResult`: ``summary`` (OUT/summary.json),
     ``out``, the episode counts and the batched-inference statistics. Raises
@@ -175,15 +176,18 @@ def load_suite(suite: str | Path = "tiny", out: str | Path = "icr_out", *, k: in
 
 def run_episode(scenario: Scenario | str | Path, instruction_set: InstructionSet, agent: Agent | str,
                 options: RunOptions | None = None,
-                callbacks: Sequence[EpisodeCallback] = ()) -> EpisodeLog:
+                callbacks: Sequence[EpisodeCallback] = (),
+                baseline: InstructionSet | None = None) -> EpisodeLog:
     """Drive one closed-loop episode and return its :class:`~icrsumo.core.types.EpisodeLog`.
 
     ``scenario``: a :class:`~icrsumo.world.scenario.Scenario` or a convert-routes scenario folder;
     ``instruction_set``: one of its route's sequences (:meth:`Suite.instruction_set`);
     ``agent``: an agent object (``reset(info)``, ``act(obs)``) or a spec as in :func:`evaluate`
     (a fresh agent is made); ``options``: :class:`icrsumo.sim.RunOptions` (agent rate, BEV
-    spec); ``callbacks``: :class:`icrsumo.sim.EpisodeCallback` side effects (timings, video,
-    your own). Score it with :func:`icrsumo.scoring.score_episode`.
+    spec, ``asking``); ``callbacks``: :class:`icrsumo.sim.EpisodeCallback` side effects (timings,
+    video, your own); ``baseline``: the route's baseline sequence, whose words answer asks with
+    ``asking`` on (not needed when ``instruction_set`` is the baseline). Score it with
+    :func:`icrsumo.scoring.score_episode`.
     Raises :class:`icrsumo.core.errors.InputError` before the episode starts for a scenario whose
     manifest and network disagree, or an ``instruction_set`` of another route."""
     from icrsumo.agents.registry import make_agent
@@ -199,7 +203,7 @@ def run_episode(scenario: Scenario | str | Path, instruction_set: InstructionSet
                          f"is not a sequence of the scenario's route {sc.route_id!r}",
                          "pass the instructions generated for this scenario")
     instance = make_agent(agent) if isinstance(agent, str) else agent
-    return _run(sc, instruction_set, instance, options or RunOptions(), callbacks)
+    return _run(sc, instruction_set, instance, options or RunOptions(), callbacks, baseline=baseline)
 
 
 def digest(out: str | Path = "icr_out") -> str:

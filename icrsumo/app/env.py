@@ -15,7 +15,13 @@ libraries without Text support).
 Action: ``action_type="control"`` (default): Box [steer, throttle, brake] in [-1, 1] x [0, 1]
 x [0, 1]; ``"waypoints"``: Box (n_waypoints, 2) m in the ego frame (x forward, y left, 0.5 s
 apart; the speed is their spacing), tracked by the built-in controller. Actions outside the
-box are clipped to it; NaN raises :class:`icrsumo.agents.base.AgentError`.
+box are clipped to it; NaN raises :class:`icrsumo.agents.base.AgentError`. With ``asking=True``
+the action is a ``Dict``: that box under the action type's name (``"control"`` or
+``"waypoints"``) and ``"ask"``, ``Discrete(2)``: 1 asks the navigator for clarification (it
+answers with the route's next maneuver in the baseline's words, 2 simulated seconds later, at
+most once per maneuver; :mod:`icrsumo.sim.asking`). The answer is then the observation's
+``instruction`` until the next instruction is triggered, and ``info["answer"]`` is True while it
+is; ``info["asks"]`` counts the asks so far (the episode log keeps them).
 
 Reward per step, in route-completion points (the Driving Score's units, 0-100)::
 
@@ -85,7 +91,8 @@ def to_observation(obs: dict[str, Any], info: dict[str, Any]) -> Observation:
 
     return Observation(t=float(info["t"]), bev=np.asarray(obs["bev"]),
                        speed=float(np.asarray(obs["speed"])[0]), instruction=text(obs["instruction"]),
-                       instruction_id=int(info["instruction_id"]), notice=text(obs["notice"]))
+                       instruction_id=int(info["instruction_id"]), notice=text(obs["notice"]),
+                       answer=bool(info.get("answer", False)))
 
 
 #: the keys ``reset(options=...)`` reads
@@ -143,7 +150,9 @@ class ICRDriveEnv(gym.Env):
     instruction file (``generate``), or Scenario / InstructionSet objects; when both are None,
     the bundled ``route`` of ``suite`` (default tiny_003, 78 m, one left turn) converted and
     generated into the cache on first use (:func:`icrsumo.evaluation.bundled.bundled_route`).
-    ``family`` / ``k``: which sequence of the route (default the baseline).
+    ``family`` / ``k``: which sequence of the route (default the baseline). ``asking``: the
+    action may ask the navigator for clarification (module docstring); it needs the route's
+    baseline sequence among ``instructions``.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -153,7 +162,7 @@ class ICRDriveEnv(gym.Env):
                  route: str = DEFAULT_ROUTE, suite: str = DEFAULT_SUITE, traffic: str = "normal",
                  family: str = "baseline", k: int = 0, action_type: str = "control",
                  n_waypoints: int = 4, text_space: str = "text", max_text_length: int = 256,
-                 render_mode: str | None = None) -> None:
+                 render_mode: str | None = None, asking: bool = False) -> None:
         if action_type not in ACTION_TYPES:
             raise InputError("action_type", action_type, "unknown action type", "use control or waypoints")
         if text_space not in TEXT_SPACES:
@@ -178,10 +187,17 @@ class ICRDriveEnv(gym.Env):
         self.sets = {(s.family, s.k): s for s in sets}
         self.family, self.k = family, k
         self._set(family, k)  # fail early on an unknown sequence
+        if not isinstance(asking, bool):
+            raise InputError("asking", repr(asking)[:40], "must be True or False", "give a bool")
+        self.asking = asking
+        if asking and ("baseline", 0) not in self.sets:
+            raise InputError("asking", self.scenario.route_id,
+                             "needs the route's baseline instruction sequence, whose words answer the agent",
+                             "pass the route's instruction file (or its baseline sequence among the sets)")
         self.action_type, self.n_waypoints = action_type, n_waypoints
         self.text_space, self.max_text_length = text_space, max_text_length
         self.render_mode = render_mode
-        self.opts = RunOptions()
+        self.opts = RunOptions(asking=asking)
         bev = self.opts.bev
         chars = set(string.digits + string.ascii_letters + string.punctuation + " ")
         for s in sets:
@@ -201,10 +217,13 @@ class ICRDriveEnv(gym.Env):
             "notice": text,
         })
         if action_type == "control":
-            self.action_space = spaces.Box(np.array([-1.0, 0.0, 0.0], np.float32),
-                                           np.array([1.0, 1.0, 1.0], np.float32), dtype=np.float32)
+            self.drive_space = spaces.Box(np.array([-1.0, 0.0, 0.0], np.float32),
+                                          np.array([1.0, 1.0, 1.0], np.float32), dtype=np.float32)
         else:
-            self.action_space = spaces.Box(-WAYPOINT_LIMIT_M, WAYPOINT_LIMIT_M, (n_waypoints, 2), np.float32)
+            self.drive_space = spaces.Box(-WAYPOINT_LIMIT_M, WAYPOINT_LIMIT_M, (n_waypoints, 2), np.float32)
+        #: the action space: the drive box, or with asking a Dict of it and ``ask``
+        self.action_space = spaces.Dict({action_type: self.drive_space, "ask": spaces.Discrete(2)}) \
+            if asking else self.drive_space
         self._episode: Episode | None = None
         self._obs: Observation | None = None
         self._suspended = False
@@ -237,15 +256,26 @@ class ICRDriveEnv(gym.Env):
                 "instruction": self._text(obs.instruction), "notice": self._text(obs.notice)}
 
     def _action(self, action: Any) -> Action:
+        ask = False
+        if self.asking:
+            if not isinstance(action, dict) or set(action) != {self.action_type, "ask"}:
+                raise AgentError(f"with asking the action is a dict with keys {self.action_type!r} and "
+                                 f"'ask', got {type(action).__name__}")
+            flag = np.asarray(action["ask"])
+            if flag.shape != () or flag.item() not in (0, 1):
+                raise AgentError(f"action['ask'] must be 0 or 1, got {action['ask']!r}"[:120])
+            action, ask = action[self.action_type], bool(flag.item())
+        space = self.drive_space
         a = np.asarray(action, dtype=np.float64)
-        if a.shape != self.action_space.shape:
-            raise AgentError(f"action must have shape {self.action_space.shape}, got {a.shape}")
+        if a.shape != space.shape:
+            raise AgentError(f"action must have shape {space.shape}, got {a.shape}")
         if not np.all(np.isfinite(a)):
             raise AgentError("action contains NaN or inf")
-        a = np.clip(a, self.action_space.low, self.action_space.high)
+        a = np.clip(a, space.low, space.high)
         if self.action_type == "control":
-            return Action(control=Control(steer=float(a[0]), throttle=float(a[1]), brake=float(a[2])))
-        return Action(waypoints=a)
+            control = Control(steer=float(a[0]), throttle=float(a[1]), brake=float(a[2]))
+            return Action(control=control, ask=ask)
+        return Action(waypoints=a, ask=ask)
 
     def _rc(self) -> float:
         mon = self._episode.monitor
@@ -277,7 +307,8 @@ class ICRDriveEnv(gym.Env):
             other._suspend()
         self._suspended = False
         self._penalties = _Penalties()
-        self._episode = Episode(self.scenario, iset, self.opts, callbacks=(self._penalties,))
+        self._episode = Episode(self.scenario, iset, self.opts, callbacks=(self._penalties,),
+                                baseline=self.sets.get(("baseline", 0)))
         _live = weakref.ref(self)
         obs = self._episode.start()
         if obs is None:  # ended before the first decision: the simulator failed
@@ -288,7 +319,7 @@ class ICRDriveEnv(gym.Env):
         info = {"route_id": self.scenario.route_id, "town": self.scenario.town, "family": iset.family,
                 "k": iset.k, "route_length": self._episode.route.length,
                 "control_dt": self._episode.info.control_dt, "t": obs.t, "instruction_id": obs.instruction_id,
-                "net": str(self.scenario.net), "episode_info": self._episode.info}
+                "net": str(self.scenario.net), "episode_info": self._episode.info, **self._asking_info(obs)}
         return self._observe(obs), info
 
     def step(self, action: Any):
@@ -318,7 +349,7 @@ class ICRDriveEnv(gym.Env):
         seen = obs if obs is not None else self._obs  # at the end, the last observation stands
         info: dict[str, Any] = {"t": seen.t, "progress": ep.progress, "route_length": ep.route.length,
                                 "instruction_id": seen.instruction_id,
-                                "infractions_so_far": len(infractions)}
+                                "infractions_so_far": len(infractions), **self._asking_info(seen)}
         terminated = truncated = False
         if obs is None:
             obs = self._obs  # the episode ended: the last observation stands
@@ -334,12 +365,22 @@ class ICRDriveEnv(gym.Env):
         self._obs = obs
         return self._observe(obs), float(reward), bool(terminated), bool(truncated), info
 
-    def agent_action(self, action: Action) -> np.ndarray:
+    def _asking_info(self, obs: Observation) -> dict[str, Any]:
+        """``answer`` and ``asks`` of ``info`` (with asking only)."""
+        nav = self._episode.navigator if self._episode is not None else None
+        return {"answer": obs.answer, "asks": len(nav.asks)} if nav is not None else {}
+
+    def agent_action(self, action: Action) -> np.ndarray | dict[str, Any]:
         """An agent's :class:`Action` as this environment's action: [steer, throttle, brake]
         (``action_type="control"``) or the first ``n_waypoints`` waypoints, the last one
         repeated where there are fewer (``"waypoints"``; the speed is their spacing, so a
-        ``target_speed`` is not used). An AgentError when the agent's kind of action does not
-        fit the environment's."""
+        ``target_speed`` is not used); with asking, a dict of it and ``ask`` (0 or 1). An
+        AgentError when the agent's kind of action does not fit the environment's."""
+        drive = self._drive(action)
+        return {self.action_type: drive, "ask": int(action.ask)} if self.asking else drive
+
+    def _drive(self, action: Action) -> np.ndarray:
+        """The drive part of :meth:`agent_action`."""
         if self.action_type == "control":
             if action.control is None:
                 raise AgentError("this environment takes control actions and the agent gave waypoints: make "

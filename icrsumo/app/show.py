@@ -226,8 +226,9 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
         raise InputError(dest, "", f"cannot be made for the video and still ({err.strerror or err})",
                          "give a folder you can write to for them (dest)") from None
     recorder = _Recorder(dest / "episode.webm", moment_t)
-    log = run_episode(sc, iset, factory(), RunOptions(scoring=scoring), callbacks=[recorder],
-                      guard=guards[1]() if guards is not None else None)
+    log = run_episode(sc, iset, factory(), RunOptions(scoring=scoring, asking=cfg.get("asking") is True),
+                      callbacks=[recorder], guard=guards[1]() if guards is not None else None,
+                      baseline=sets.get(("baseline", 0)))
     still = dest / "moment.png"
     if recorder.still is not None:
         write_image(still, recorder.still, f"t = {moment_t:.1f} s: {moment}")

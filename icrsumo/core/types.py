@@ -269,6 +269,20 @@ class GuardDecision:
 
 
 @dataclass(frozen=True)
+class Ask:
+    """An agent's ask for clarification (``Action.ask``, with asking on): ``t`` (s) and route
+    ``progress`` (m) of the observation it answered, whether the navigator ``answered`` it (at
+    most once per maneuver: a later ask about the same maneuver is counted, not answered) and
+    the ``instruction_id`` of the baseline instruction it answered with (-1: not answered, or no
+    maneuver left, answered "Follow the road.")."""
+
+    t: float
+    progress: float
+    answered: bool
+    instruction_id: int = -1
+
+
+@dataclass(frozen=True)
 class EpisodeLog:
     """Everything scoring needs from one closed-loop episode, serialisable to JSON.
 
@@ -290,7 +304,8 @@ class EpisodeLog:
     ``guard``: an instruction guard's decisions (:class:`GuardDecision`; empty and absent from
     the JSON without a guard); with a guard, ``instruction`` holds the id the agent was shown
     (the last passed one; -1 before any, or for the "follow the road" shown while none passed).
-    ``termination`` is a
+    ``asks``: the agent's asks for clarification (:class:`Ask`; empty, and absent from the JSON,
+    when it asked none or asking was off). ``termination`` is a
     :class:`Termination`; ``t`` strictly increases, ``progress`` never decreases, and the
     route timeout runs from ``t[0]``.
     """
@@ -320,6 +335,7 @@ class EpisodeLog:
     speed_limit: tuple[float, ...] = ()
     model_calls: tuple[ModelCall, ...] = ()
     guard: tuple[GuardDecision, ...] = ()
+    asks: tuple[Ask, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -366,7 +382,9 @@ class EpisodeRecord:
     ``model_calls`` / ``invalid_answers``: the agent's questions to a language model and how
     many answers were invalid (0 for agents without one). ``guard_checked`` /
     ``guard_blocked``: instructions an instruction guard checked and blocked (0 without one;
-    texts the family kept unchanged and empty texts are not counted).
+    texts the family kept unchanged and empty texts are not counted). ``asks`` /
+    ``asks_answered``: the agent's asks for clarification and how many the navigator answered
+    (0 without asking).
     """
 
     agent: str
@@ -390,3 +408,5 @@ class EpisodeRecord:
     invalid_answers: int = 0
     guard_checked: int = 0
     guard_blocked: int = 0
+    asks: int = 0
+    asks_answered: int = 0

@@ -76,7 +76,8 @@ class Family(StrEnum):
     """An instruction sequence's family: the baseline, one of ICR-Drive's four counterfactual
     families, or a control family (does the agent use language at all?): ``blank`` (no
     instruction text) and ``shuffled`` (each instruction replaced by a baseline instruction of
-    another maneuver)."""
+    another maneuver), or a delivery family (when and how the baseline's instructions
+    arrive: ``timing``, ``distance``, ``correction``, ``notice``)."""
 
     BASELINE = "baseline"
     PARAPHRASE = "paraphrase"
@@ -85,6 +86,10 @@ class Family(StrEnum):
     MISLEADING = "misleading"
     BLANK = "blank"
     SHUFFLED = "shuffled"
+    TIMING = "timing"
+    DISTANCE = "distance"
+    CORRECTION = "correction"
+    NOTICE = "notice"
     #: ``icrsumo attack``'s queries (k = the query) and the transfer of its worst rewrites
     ATTACK = "attack"
     TRANSFER = "transfer"
@@ -94,8 +99,11 @@ class Family(StrEnum):
 FAMILIES: tuple[Family, ...] = (Family.PARAPHRASE, Family.AMBIGUITY, Family.NOISE, Family.MISLEADING)
 #: the control families, selectable like the four
 CONTROL_FAMILIES: tuple[Family, ...] = (Family.BLANK, Family.SHUFFLED)
-#: every counterfactual family, in their canonical order (the paper's four, then the controls)
-ALL_FAMILIES: tuple[Family, ...] = FAMILIES + CONTROL_FAMILIES
+#: the delivery families (issue 45), selectable like the controls
+DELIVERY_FAMILIES: tuple[Family, ...] = (Family.TIMING, Family.DISTANCE, Family.CORRECTION, Family.NOTICE)
+#: every counterfactual family, in their canonical order (the paper's four, the controls, then
+#: the delivery families)
+ALL_FAMILIES: tuple[Family, ...] = FAMILIES + CONTROL_FAMILIES + DELIVERY_FAMILIES
 #: one line per selectable family (``icrsumo list families``)
 FAMILY_DESCRIPTIONS: dict[Family, str] = {
     Family.PARAPHRASE: "the same maneuver, worded otherwise (goal kept)",
@@ -104,6 +112,10 @@ FAMILY_DESCRIPTIONS: dict[Family, str] = {
     Family.MISLEADING: "a directive that contradicts the route (goal-conflicting)",
     Family.BLANK: "no instruction text at all",
     Family.SHUFFLED: "each instruction replaced by one of another maneuver",
+    Family.TIMING: "the baseline text delivered late, or early across a junction (goal kept)",
+    Family.DISTANCE: "the maneuver named by its distance or by ordinal, true to the route (goal kept)",
+    Family.CORRECTION: "a misleading instruction, corrected before the junction (goal kept in the end)",
+    Family.NOTICE: "notices (lights, pedestrians, merging traffic, ...) between the instructions (goal kept)",
 }
 
 

@@ -121,8 +121,9 @@ class EpisodeWorker:
         self._scenarios: dict[str, Scenario] = {}
         self._sets: dict[str, dict[tuple[str, int], InstructionSet]] = {}
 
-    def _inputs(self, job: Job) -> tuple[Scenario, InstructionSet]:
-        """The job's scenario and instruction sequence (each file read once per worker)."""
+    def _inputs(self, job: Job) -> tuple[Scenario, InstructionSet, InstructionSet | None]:
+        """The job's scenario, instruction sequence and its route's baseline sequence (each file
+        read once per worker)."""
         from icrsumo.instructions.store import read_instruction_sets
         from icrsumo.world.scenario import read_scenario
 
@@ -133,7 +134,7 @@ class EpisodeWorker:
         if sets is None:
             sets = self._sets[job.instructions] = {
                 (s.family, s.k): s for s in read_instruction_sets(Path(job.instructions))}
-        return sc, sets[(job.family, job.k)]
+        return sc, sets[(job.family, job.k)], sets.get(("baseline", 0))
 
     def factory(self, job: Job) -> Callable[[], Agent]:
         ref: Hashable = job.factory if job.factory is not None else (job.agent_spec, job.device)
@@ -158,27 +159,29 @@ class EpisodeWorker:
 
     def run(self, job: Job) -> Outcome:
         """Run one episode and score it; every failure becomes an Outcome."""
-        from icrsumo.results.logs import dumps_log, loads_log
+        from icrsumo.results.logs import ask_counts, dumps_log, loads_log
         from icrsumo.scoring import score_episode
         from icrsumo.sim.episode import RunOptions, run_episode
 
         try:
             factory = self.factory(job)
-            sc, iset = self._inputs(job)
+            sc, iset, baseline = self._inputs(job)
             guard = self.guard(job)
             agent = WatchedAgent(factory(), self.watch)
             try:
-                log = run_episode(sc, iset, agent, RunOptions(scoring=job.scoring), guard=guard)
+                log = run_episode(sc, iset, agent, RunOptions(scoring=job.scoring, asking=job.asking),
+                                  guard=guard, baseline=baseline)
             finally:
                 agent.close()  # the optional close() hook: e.g. a remote agent ends its session
             text = dumps_log(log)
             r = score_episode(loads_log(text), job.scoring)  # the stored log: a rescore gives the same
+            asks, answered = ask_counts(log)
             rec = with_scores(EpisodeRecord(
                 agent=job.agent, route_id=job.route_id, family=job.family, k=job.k, seed=job.seed,
                 status=EpisodeStatus.DONE, length=round(sc.length, 2), message=log.message,
                 model_calls=len(log.model_calls),
                 invalid_answers=sum(not c.valid for c in log.model_calls),
-                **guard_counts(log, iset)), r)
+                asks=asks, asks_answered=answered, **guard_counts(log, iset)), r)
             return Outcome.finished(rec, text)
         except Interrupted:  # the user's Ctrl-C (in-process runs): stop the evaluation
             raise

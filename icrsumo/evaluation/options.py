@@ -64,6 +64,9 @@ class EvalOptions:
     #: instruction guards (``--guard``): every agent also runs behind each, as its own rows
     #: ``AGENT+guard:NAME`` (:mod:`icrsumo.guards`)
     guards: tuple[str, ...] = ()
+    #: asking for clarification (``--asking``): the navigator answers agents' asks
+    #: (``Action.ask``; :mod:`icrsumo.sim.asking`); part of the out folder's configuration
+    asking: bool = False
 
     def check(self) -> None:
         """InputErrors for bad values (agent specs are checked when they are resolved); first
@@ -119,7 +122,7 @@ class EvalOptions:
             if isinstance(v, bool) or not isinstance(v, int):
                 raise InputError(Field(name), repr(v)[:40], f"must be an integer, not {type(v).__name__}",
                                  "give a whole number")
-        for name in ("quiet", "retry_crashed"):
+        for name in ("quiet", "retry_crashed", "asking"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(Field(name), repr(getattr(self, name))[:40], "must be True or False",
                                  "give a bool")

@@ -14,11 +14,12 @@ from icrsumo.agents.base import Agent
 from icrsumo.core.errors import Field, InputError, check_seed, expect
 from icrsumo.core.fsio import OutFolder, dumps_json, read_json, write_atomic
 from icrsumo.core.resources import bundled_suites, suite_coords
-from icrsumo.core.vocab import CONTROL_FAMILIES, variants_of
+from icrsumo.core.vocab import CONTROL_FAMILIES, DELIVERY_FAMILIES, variants_of
 from icrsumo.guards.base import guarded_name
 from icrsumo.instructions.baseline_bank import BaselineBank, load_baseline_bank
 from icrsumo.instructions.families import FAMILIES
 from icrsumo.instructions.generate import GenerateOptions, generate
+from icrsumo.instructions.store import skipped_families
 from icrsumo.world.convert import CONVERTER_VERSION, ConvertOptions, convert_routes, safe_name
 from icrsumo.world.routes import check_route_selection, route_ids, suite_file
 from icrsumo.world.scenario import find_scenarios, read_scenario
@@ -51,6 +52,8 @@ class Job:
     #: the spec (an LLM guard bound to the out folder), its factory
     guard: str = ""
     guard_factory: Callable[[], object] | None = field(default=None, compare=False)
+    #: the navigator answers the agent's asks (:mod:`icrsumo.sim.asking`)
+    asking: bool = False
 
     @property
     def key(self) -> tuple[str, str, str, int, int]:
@@ -109,14 +112,18 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None,
     drawn from the templates those did not use).
     With a ``--baseline-bank`` (``bank``: the file already loaded) the file's SHA-256 is part of
     it (its name is recorded too, but another path to the same bytes is the same
-    configuration)."""
+    configuration). With ``asking`` on, ``"asking": true`` is part of it (a folder without the
+    key was run without asking)."""
     run = dict(run or {"run": "evaluate"})
     config = {**run, "suite": opts.suite, "seed": opts.seed, "k": opts.k, "traffic": opts.traffic,
               "scoring": opts.scoring, "converter": CONVERTER_VERSION}
+    if opts.asking:
+        config["asking"] = True
     if opts.baseline_bank is not None and bank is None:
         bank = load_baseline_bank(opts.baseline_bank)
     compared = {k: v for k, v in config.items() if k not in run}
     compared["baseline_bank_sha256"] = bank.sha256 if bank is not None else None
+    compared["asking"] = opts.asking
     path = out / "config.json"
     if path.is_file():
         restore = f"restore it, or use another {Field('out')} folder"
@@ -124,7 +131,8 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None,
         if not isinstance(old, dict):
             raise InputError(path, "", "is not a JSON object", restore)
         check_run(out, old, run)
-        diff = [k for k in compared if old.get(k) != compared[k]]
+        stored = {**old, "asking": old.get("asking") is True}  # a folder without the key ran without asking
+        diff = [k for k in compared if stored.get(k) != compared[k]]
         history = old.get("k_grown_from")
         grown = [x for x in history if isinstance(x, int)] if isinstance(history, list) else []
         if diff == ["k"] and isinstance(old.get("k"), int) and opts.k > old["k"]:
@@ -132,12 +140,15 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None,
         if grown:
             config["k_grown_from"] = grown
         if diff:
-            shown = ", ".join(f"{k}={old.get(k)!r} (now {compared[k]!r})" for k in diff)
+            shown = ", ".join(f"{k}={stored.get(k)!r} (now {compared[k]!r})" for k in diff)
             fix = f"use another {Field('out')} folder, or the same options"
             if diff == ["k"]:
                 k = Field("k")
                 fix = (f"use {k} {old.get('k')} or more (a larger {k} adds the missing variants), or "
                        f"another {Field('out')} folder")
+            if "asking" in diff:
+                fix = (f"use another {Field('out')} folder, or the same options "
+                       f"({'with' if stored['asking'] else 'without'} {Field('asking')})")
             if "converter" in diff:
                 fix = ("its scenarios were converted by an earlier icrsumo, whose background traffic "
                        "differs (docs/fidelity.md, class F), so new episodes would not be comparable: "
@@ -230,7 +241,8 @@ def prepare_suite(opts: EvalOptions, agents: Mapping[str, dict] | None = None,
         if bank is not None and bank.note():
             print(bank.note(), file=sys.stderr)
         written, failures = generate(scenarios, instr_dir, GenerateOptions(
-            families=FAMILIES + tuple(f for f in CONTROL_FAMILIES if f in opts.families), k=opts.k,
+            families=FAMILIES + tuple(f for f in CONTROL_FAMILIES + DELIVERY_FAMILIES if f in opts.families),
+            k=opts.k,
             seed=opts.seed, workers=1, baseline_bank=bank, grown_from=tuple(config.get("k_grown_from", ()))))
         if not written and not (out / "results.sqlite").exists():  # (with a store: run checks it)
             errors = list(skipped) + list(failures)
@@ -281,7 +293,9 @@ def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mappin
               guard_names: Mapping[str, str] | None = None) -> list[Job]:
     """Every episode of the protocol, in a fixed order (agent, guard, route, family, k);
     ``names``: agent spec -> the name its results are stored under; ``guard_names``: guard spec
-    -> its name (each agent runs unguarded, then behind each of ``opts.guards``)."""
+    -> its name (each agent runs unguarded, then behind each of ``opts.guards``). A delivery
+    family that could not be built for a route (the instructions' index names it) has no
+    episodes there."""
     scs = []
     for d in find_scenarios(scenarios):
         try:
@@ -293,6 +307,7 @@ def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mappin
         scs = [(d, sc) for d, sc in scs if sc.route_id in set(opts.routes)]
     sets = [("baseline", 0)] + [(f, k) for f in opts.families for k in range(variants_of(f, opts.k))]
     guard_names = guard_names or {}
+    skipped = skipped_families(instr_dir)
     jobs = []
     for spec in opts.agents:
         for guard in ("", *opts.guards):
@@ -300,6 +315,9 @@ def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mappin
             for d, sc in scs:
                 instr = str(instr_dir / f"{safe_name(sc.route_id)}.json")
                 for fam, k in sets:
+                    if fam in skipped.get(sc.route_id, {}):
+                        continue
                     jobs.append(Job(spec, name, sc.route_id, fam, k, opts.seed, str(d), instr,
-                                    device=opts.agent_device, scoring=opts.scoring, guard=guard))
+                                    device=opts.agent_device, scoring=opts.scoring, guard=guard,
+                                    asking=opts.asking))
     return jobs

@@ -99,16 +99,20 @@ class NavPlan:
         return "; ".join(parts)
 
 
+def maneuver_over(m: Maneuver) -> float:
+    """The route position (m) from which maneuver ``m`` is behind the ego: a junction
+    maneuver's ``end`` (the ego has left the junction), 30 m past a lane change."""
+    return m.end if m.end > m.pos else m.pos + 30.0
+
+
 def plan_at(maneuvers: tuple[Maneuver, ...], branches: dict[int, tuple[Intent, ...]],
             progress: float) -> NavPlan:
     """The :class:`NavPlan` at route ``progress`` (m) of a route's ``maneuvers`` (sorted by
     position; ``branches``: index -> the intents offered at that maneuver's junction). A
-    junction maneuver stays in the plan until the ego has left it (``end``), a lane change until
-    it is 30 m behind."""
+    maneuver stays in the plan until it is behind the ego (:func:`maneuver_over`)."""
     steps = []
     for i, m in enumerate(maneuvers):
-        over = m.end if m.end > m.pos else m.pos + 30.0
-        if over <= progress:
+        if maneuver_over(m) <= progress:
             continue
         steps.append(PlanStep(m.kind, m.intent, round(m.pos - progress, 2), m.junction, branches.get(i, ())))
     return NavPlan(round(progress, 2), tuple(steps))

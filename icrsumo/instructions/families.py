@@ -74,15 +74,19 @@ def _bank_variants(instr: Instruction, family: str, banks: Banks, k: int,
     for i in _draw(rng, len(pool), k, f"{banks.folder}/{family}.json", taken):
         entry = pool[i]
         text = fill(entry.text, instr.junction)
-        got = classify_intent(text)
-        if got not in want:
-            raise InputError(
-                banks.folder / f"{family}.json", f"entry {entry.id}",
-                f"{text!r} classifies as {got.value}, not {'/'.join(sorted(w.value for w in want))}",
-                "rephrase the entry",
-            )
+        assert_intent(text, want, banks.folder / f"{family}.json", f"entry {entry.id}")
         out.append((text, entry.id))
     return out
+
+
+def assert_intent(text: str, want: frozenset[Intent], file: object, place: str,
+                  fix: str = "rephrase the entry") -> None:
+    """An InputError naming ``file`` and ``place`` unless ``text`` classifies as one of ``want``."""
+    got = classify_intent(text)
+    if got not in want:
+        raise InputError(file, place,
+                         f"{text!r} classifies as {got.value}, not {'/'.join(sorted(w.value for w in want))}",
+                         fix)
 
 
 def _noise_variants(instr: Instruction, banks: Banks, k: int,

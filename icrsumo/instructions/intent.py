@@ -29,7 +29,8 @@ Pipeline
    rite/write/strait; a real word there stays what it is ("turn tight" is no turn).
    Glued words split when both halves are known ("turnleft").
 2. Clauses: split at boundaries and at ``and, but, then, so, however, actually, otherwise,
-   instead, rather, because, since`` (not ``instead of`` / ``rather than``).
+   instead, rather, because, since`` (not ``instead of`` / ``rather than``); each clause keeps
+   the word that opened it.
 3. Mentions per clause, each with a level: STRONG (explicit left/right/straight, lane change,
    stop, roundabout exit by ordinal), MEDIUM (implied: a highway exit or off-ramp -> RIGHT;
    crossing a junction -- "through/across/past/over the (coming) intersection", "cross the
@@ -59,9 +60,13 @@ Pipeline
      "straight is closed") contributes nothing, and so does a clause about another road user's
      maneuver: one opening with a road user ("the black car", "a motorbike", "the bus in front
      of you") followed, past a place ("ahead", "in the left lane"), by a verb of its own ("is
-     turning left", "will turn", "wants to merge"); it asks the ego for nothing.
+     turning left", "will turn", "wants to merge"); it asks the ego for nothing. Passing one on a
+     side is a lane change ("overtake the tractor on the right", "pass the cyclist on the left",
+     "go around it on the left"); "stay behind it" is FOLLOW.
    * Commands that are no maneuver: driving faster ("speed up", "go faster", "accelerate", "pick
-     up the pace") is FOLLOW; being dropped off or let out ("drop me off", "let us out") is STOP.
+     up the pace", "put your foot down") is FOLLOW; being dropped off or let out ("drop me off",
+     "let us out") and letting another road user by ("let them pass", "let the bus through") is
+     STOP.
      "Stay / keep right at the fork (the Y-junction, the split)" is a turn.
    * Roundabouts (roundabout/rotary/traffic circle anywhere in the text): exit ordinals map
      1st -> RIGHT, 2nd -> STRAIGHT, 3rd and later -> LEFT ("third exit", "3rd exit",
@@ -71,19 +76,20 @@ Pipeline
      exit.", "Roll out on the third exit") is read the same way: highway exits go by number
      or by "next".
    * Elsewhere an exit without a stated side ("Take exit 23B", "Take the exit", "Exit the
-     highway", "Leave / quit the motorway", "off-ramp") is RIGHT: the bundled towns drive on the right
-     and highway exits leave to the right. A stated side wins ("take the exit on the left").
+     highway", "Leave / quit the motorway", "off-ramp", "come / get off at junction 12 / at the
+     slip road") is RIGHT: the bundled towns drive on the right and highway exits leave to the
+     right. A stated side wins ("take the exit on the left").
    * Vague destination talk is UNKNOWN ("Head to the destination", "Go that way"): a motion
      verb needs a road, a heading or along/down/onto to be FOLLOW, while continue / follow /
      proceed / keep going are FOLLOW on their own ("Continue to the destination" -> FOLLOW).
      "U-turn", "turn around" and a turn without a side are UNKNOWN.
-   * Stop: stop/halt (not "stop sign", "bus stop"), "come to a (complete) stop", pull over/up,
-     brake, wait, park, stand still, stay put, hold your position.
+   * Stop: stop/halt (not "stop sign", "bus stop", "four-way stop"), "come to a (complete)
+     stop", pull over/up, brake, wait, park, stand still, stay put, hold your position.
    * A clause with no mention that is a caution notice ("Stop sign ahead", "Watch out for
      pedestrians", "Yield to cyclists", "Give way", "Slow down", "Traffic light ahead") is a
      NOTICE-level STOP: the weakest mention of all (the baseline bank labels notices "stop").
-     So are being aware / mindful / alert of something, "heads up", and slowing down
-     ("decelerate", "reduce your speed", "easy on the gas").
+     So are being aware / mindful / alert of something, "heads up", "keep an eye out", and
+     slowing down ("decelerate", "drive slower", "reduce your speed", "easy on the gas").
 4. Negation: ``not, no, never, avoid, skip, ignore, forget, cancel, without, disregard, nor,
    instead of, rather than, stop + -ing`` negate the mentions after them in their clause up to
    the end of the first verb phrase (a new driving verb after a negated mention ends the scope:
@@ -91,9 +97,16 @@ Pipeline
    negations mean something themselves: "don't move / go no further / do not proceed until"
    -> STOP; "don't change lanes", "skip this exit", "don't turn here / off", "do not deviate
    (stray, swerve, depart) from this route", "don't leave the highway" -> FOLLOW. Two different
-   directions joined by "or" ("turn left or right") cancel each other.
+   directions joined by "or" ("turn left or right") cancel each other. A maneuver negated with
+   "until" / "till" after it is deferred, not refused ("don't turn right until the cars have
+   passed" -> RIGHT; a negated stop stays negated). A short clause that only points back ("not
+   the first right, the second one"; "not this exit, the next one") asks for the maneuver the
+   clause before it negated.
 5. Subordination: mentions after ``before, after, once, when, whenever, until, till, while, as,
-   if, unless`` in their clause, and clauses introduced by ``otherwise``, are subordinate.
+   if, unless`` in their clause, and clauses introduced by ``otherwise``, are subordinate. The
+   condition ends at an imperative after it, a base-form driving verb not preceded by a subject,
+   modal or determiner ("once clear turn left", "after that head left"; not "when you turn
+   left", "if you can go"): what follows is the main clause's.
 
 Precedence (``rules.choose``)
 -----------------------------
@@ -102,11 +115,17 @@ b. Within one clause only the highest level survives (an explicit side beats an 
    side, a stated direction beats FOLLOW).
 c. Main-clause mentions are used if there are any, else subordinate ones
    ("after turning left, go straight" -> STRAIGHT; "change to the left lane before you turn
-   left" -> LANE_LEFT; "turn left if you can, otherwise go straight" -> LEFT).
+   left" -> LANE_LEFT; "turn left if you can, otherwise go straight" -> LEFT). A stop or wait
+   before a maneuver is its precondition: when a clause's main mentions are all STOP and its
+   condition (``before, until, till``) names a maneuver, the maneuver counts as main ("wait for
+   a gap before you turn left" -> LEFT).
 d. Any non-FOLLOW intent beats FOLLOW ("turn left and follow the road" -> LEFT); among them the
    last directive in the text wins ("don't go straight, turn left instead" -> LEFT, "stop at
    the light, then turn left" -> LEFT, "turn left, no, right!" -> RIGHT, "use the left lane
-   to turn left" -> LEFT).
+   to turn left" -> LEFT, "stop for oncoming traffic, once clear turn left" -> LEFT). A clause
+   opened by "and" / "then" that only continues ("continue / carry / keep straight (on)", no
+   junction named) after a turn or lane change is FOLLOW, not a maneuver ("slight right at the
+   fork and continue straight" -> RIGHT).
 e. Otherwise any FOLLOW mention -> FOLLOW; otherwise a caution notice -> STOP; nothing ->
    UNKNOWN.
 """

@@ -50,7 +50,7 @@ KEEP_NEXT = _words(
     "going driving moving rolling cruising heading on along ahead in to following forward traveling "
     "travelling the this your"
 )
-STAY_NEXT = _words("on in along with within the this your")
+STAY_NEXT = _words("on in along with within the this your behind")
 DIRECTIVE = _words(
     "turn turning turns go going goes take taking make making keep keeping bear veer head heading drive "
     "driving move moving change changing switch merge merging stay staying continue continuing follow "
@@ -104,7 +104,7 @@ ROAD_USERS = _words(
 )
 THIRD_DETS = _words("that those these some another every")
 #: words of a place after the road user ("ahead", "behind you", "in front of you", "in the left lane")
-PLACE_WORDS = _words("ahead behind in front of you the left right lane on your next to beside there here "
+PLACE_WORDS = _words("ahead behind in front of you us the left right lane on your next to beside there here "
                       "black white red blue grey gray silver green yellow big small")
 THIRD_VERBS = _words(
     "is are was were will would wants want seems seem has have keeps plans intends starts tries about "
@@ -115,7 +115,7 @@ FORK_PLACE = JUNCTION | _words("fork forks split y")
 FASTER = _words("accelerate accelerating faster quicker")
 PACE = _words("pace speed")
 US = _words("me us")
-NO_MANEUVER = FASTER | _words("speed drop let pick")
+NO_MANEUVER = FASTER | _words("speed drop let pick foot")
 STOP_HEADS = _words(
     "stop stops stopping halt standstill brake brakes braking wait waiting park pull stand stay hold"
 )
@@ -127,7 +127,7 @@ TRAVERSE_SKIP = DETS | _words(
 )
 CROSS_SKIP = TRAVERSE_SKIP | _words("over at")
 STOP_NOUN_NEXT = _words("sign signs line lines light lights bar signal signals marker street")
-STOP_NOUN_PREV = _words("bus truck rest pit tram taxi next last first non one")
+STOP_NOUN_PREV = _words("bus truck rest pit tram taxi next last first non one way")
 STOP_COME = _words("come comes coming bring make pull roll")
 STOP_ADJ = _words("a the complete full sudden abrupt quick emergency gentle rolling dead")
 PARK_PREV = _words("please and then now just to can should must safely")
@@ -156,7 +156,7 @@ CAUTION = _words(
     "wary vigilant attentive"
 )
 # slowing down is a caution notice too ("decelerate", "reduce your speed", "ease off the gas")
-DECELERATE = _words("decelerate decelerates decelerating deceleration")
+DECELERATE = _words("decelerate decelerates decelerating deceleration slower slowly")
 SPEED = _words("speed speeds velocity pace gas throttle accelerator")
 LESS = _words("reduce reduces reducing reduction lower lowering decrease decreasing cut drop ease easy")
 HAZARD = _words(
@@ -186,6 +186,41 @@ EXIT_BY = _words("at by on via using")
 DEVIATE = _words("deviate deviating stray straying swerve diverge diverging depart departing")
 OR_GAP = _words("or either to the go turn")
 BOUNDARY = frozenset({",", "."})
+# --- commands as people say them: conditions, continuations, back-references ------------------
+#: base-form verbs that open an imperative after a condition ("once clear turn left")
+IMPERATIVE = _words(
+    "turn go take make keep bear veer head drive move change switch merge stay continue follow proceed "
+    "exit enter stop use get pull cross hang steer swing shift wait park halt brake carry leave join "
+    "remain travel"
+)
+#: words before a base-form verb that make it no imperative ("when you turn", "if you can go")
+NOT_IMPERATIVE_PREV = DETS | _words(
+    "you we i they it he she one someone to can could will would should must may might do does did not "
+    "shall need needs have has let us"
+)
+#: a condition that is only a pronoun ("after that, head left")
+THAT = _words("that this which")
+#: subordinators whose condition comes before the maneuver ("wait ... before you turn left")
+DEFERRING = _words("before until till")
+#: negations of a maneuver that defer it rather than refuse it ("don't turn right until ...")
+NEG_DEFER = _words("until till")
+#: a clause opened by these after a maneuver may be its continuation ("... and continue straight")
+CONTINUATION_OPENERS = _words("and then")
+CONTINUATION_HEADS = _words("continue continuing carry keep proceed")
+#: a clause that points back at a negated maneuver ("not the first right, the second one")
+BACK_REFERENCE = frozenset(ORDINALS) | _words("next other following")
+#: passing another road user on a side is a lane change ("overtake the tractor on the right")
+OVERTAKE_VERBS = _words("overtake overtaking pass passing past around round")
+OVERTAKEN = _words("it them him her")
+#: yielding ("let them pass", "let the bus through"), a STOP
+LET_YIELD = _words("pass through by past cross")
+#: leaving a highway at a numbered junction or slip road ("come off at junction 12")
+OFF_VERBS = _words("come get pull turn")
+SLIP = _words("slip")
+#: driving faster in idioms ("put your foot down")
+FASTER_IDIOMS = (_words("foot down"),)
+#: caution notices in two words ("look out", "give way", "heads up", "keep an eye out")
+CAUTION_PAIRS = tuple(map(_words, ("look out", "give way", "heads up", "eye out", "eyes out", "eyes peeled")))
 HEADS = LEFT_RIGHT | LANE | _words("straight stop halt exit ramp follow continue proceed brake wait park")
 
 # --- spelling (normalize) ------------------------------------------------------------------------
@@ -336,6 +371,8 @@ RULE_WORDS = (
     | CAUTION | DECELERATE | SPEED | LESS | START_VERBS | START_OBJECTS | frozenset(SET_OFF)
     | frozenset().union(*SET_OFF.values()) | COURSE_KEEP | COURSE | COURSE_SKIP | DEVIATE
     | _words("heads quit quits quitting leave leaves") | NO_IDIOM
+    | IMPERATIVE | DEFERRING | CONTINUATION_HEADS | OVERTAKE_VERBS | LET_YIELD | OFF_VERBS | SLIP
+    | _words("foot eye eyes peeled")
 )
 KNOWN = STOP_LIST | RULE_WORDS | frozenset(FUZZY_TARGETS)
 NO_SLOT_FIX = KNOWN - frozenset(SLOT_HOMOPHONES)

@@ -14,6 +14,10 @@ from . import lexicon as lex
 
 __all__ = ["Context", "Level", "Mention", "choose", "mentions"]
 
+#: what "... and continue straight" continues; and the maneuvers a stop or wait before them yields to
+_TURNS = frozenset({Intent.LEFT, Intent.RIGHT, Intent.LANE_LEFT, Intent.LANE_RIGHT})
+_MANEUVERS = _TURNS | {Intent.STRAIGHT}
+
 
 class Level(IntEnum):
     """How strongly a mention asks for its intent; within a clause only the highest level survives."""
@@ -50,18 +54,19 @@ class Context:
         return cls(bool(words & lex.ROUNDABOUT), bool(words & lex.JUNCTION), bool(words & lex.HIGHWAY))
 
 
-def _clauses(tokens: tuple[str, ...]) -> list[tuple[tuple[str, ...], bool]]:
-    """(tokens, introduced-by-otherwise) for each clause, in text order."""
-    out: list[tuple[tuple[str, ...], bool]] = []
-    start, alt = 0, False
+def _clauses(tokens: tuple[str, ...]) -> list[tuple[tuple[str, ...], str]]:
+    """(tokens, opener) for each clause, in text order: the opener is the last boundary or joining
+    word before it ("and", "then", "otherwise", ","; "" for the first clause)."""
+    out: list[tuple[tuple[str, ...], str]] = []
+    start, opener = 0, ""
     for i, tok in enumerate(tokens):
         split = tok in lex.SPLIT and not (tok in lex.NEGATOR_HEADS and _is_negator(tokens, i))
         if tok in lex.BOUNDARY or split:
             if i > start:
-                out.append((tokens[start:i], alt))
-            start, alt = i + 1, tok == "otherwise"
+                out.append((tokens[start:i], opener))
+            start, opener = i + 1, tok
     if start < len(tokens):
-        out.append((tokens[start:], alt))
+        out.append((tokens[start:], opener))
     return out
 
 
@@ -103,10 +108,11 @@ def _negation(c: tuple[str, ...]) -> tuple[list[bool], list[Mention]]:
             j = i + 1
             while j < n and c[j] in lex.NEG_FILLER:
                 j += 1
-            if j < n and c[j] in lex.NEG_CANCEL:  # "don't forget to turn left"
+            cancel = j < n and c[j] in lex.NEG_CANCEL  # "don't forget to turn left"
+            meaning = None if cancel else _negated_meaning(c, j)
+            if cancel or (meaning is None and _deferred(c, j)):  # "don't turn right until ...": later
                 i, active = j + 1, False
                 continue
-            meaning = _negated_meaning(c, j)
             if meaning is not None:
                 extra.append(Mention(meaning, Level.STRONG if meaning is Intent.STOP else Level.WEAK, j))
             i, active, seen = i + 1, True, False
@@ -118,6 +124,12 @@ def _negation(c: tuple[str, ...]) -> tuple[list[bool], list[Mention]]:
             seen = seen or c[i] in lex.HEADS
         i += 1
     return neg, extra
+
+
+def _deferred(c: tuple[str, ...], j: int) -> bool:
+    """Whether the maneuver negated at ``j`` is deferred, not refused: "until" / "till" follows it
+    ("do not take a right turn until all cars have passed"); a negated stop stays negated."""
+    return j < len(c) and c[j] not in lex.STOP_HEADS and any(t in lex.NEG_DEFER for t in c[j + 1 :])
 
 
 def _is_direction(c: tuple[str, ...], i: int) -> bool:
@@ -201,9 +213,21 @@ def _left_right(c: tuple[str, ...], i: int, copula: bool, bend: bool) -> Intent 
         return turn  # "the only open way is left", "then it's a right"
     if copula or bend:
         return None
-    if _lane_verb(c, i):
+    if _lane_verb(c, i) or _overtakes(c, i):
         return lane
     return None if _locative(c, i) else turn
+
+
+def _overtakes(c: tuple[str, ...], i: int) -> bool:
+    """Whether left/right at ``i`` is the side on which the ego passes another road user ("pass
+    the cyclist on the left", "go around it on the right"), a lane change."""
+    on = i - 1 if i >= 1 and c[i - 1] == "on" else i - 2
+    if on < 1 or c[on] != "on":
+        return False
+    for k in range(on - 1, max(on - 6, -1), -1):
+        if c[k] in lex.OVERTAKE_VERBS:
+            return any(t in lex.ROAD_USERS or t in lex.OVERTAKEN for t in c[k + 1 : on])
+    return False
 
 
 def _exit_ordinal(c: tuple[str, ...], i: int) -> int | None:
@@ -334,6 +358,8 @@ def _exit_mention(c: tuple[str, ...], i: int, tok: str, prev: str, nxt: str, ctx
         if k >= 2 and not ctx.highway:
             return Mention(_ordinal_intent(k), Level.STRONG, i)
         return Mention(Intent.RIGHT, Level.MEDIUM, i)
+    if tok == "off" and prev in lex.OFF_VERBS and _off_at_exit(c, i):
+        return Mention(Intent.RIGHT, Level.MEDIUM, i)
     if tok in lex.ORDINALS:  # "take the first (one)" at a roundabout
         if ctx.roundabout and prev == "the" and nxt in ("", "one"):
             return Mention(_ordinal_intent(lex.ORDINALS[tok]), Level.STRONG, i)
@@ -345,6 +371,13 @@ def _exit_mention(c: tuple[str, ...], i: int, tok: str, prev: str, nxt: str, ctx
     if _followed_by(c, i, lex.HIGHWAY, 3):  # leave / get off the motorway
         return Mention(Intent.RIGHT, Level.MEDIUM, i)
     return _follow(c, i, tok, nxt)
+
+
+def _off_at_exit(c: tuple[str, ...], i: int) -> bool:
+    """Whether "off" at ``i`` leaves a highway: "(come / get) off at junction 12 / the slip road"."""
+    tail = c[i + 2 : i + 6] if c[i + 1 : i + 2] == ("at",) else ()
+    numbered = any(t == "junction" and n.isdigit() for t, n in zip(tail, tail[1:]))
+    return numbered or any(t in lex.EXIT_CONTEXT or t in lex.SLIP for t in tail)
 
 
 def _crosses_junction(c: tuple[str, ...], i: int, junction: bool) -> bool:
@@ -397,13 +430,21 @@ def _third_party(c: tuple[str, ...]) -> bool:
 
 def _speed_or_drop_off(c: tuple[str, ...], words: set[str]) -> Intent | None:
     """Commands that are no maneuver: driving faster ("speed up", "go faster", "accelerate",
-    "pick up the pace") keeps to the road (FOLLOW); being dropped off / let out is a STOP."""
+    "pick up the pace", "put your foot down") keeps to the road (FOLLOW); being dropped off / let
+    out, and letting another road user by ("let them pass"), is a STOP."""
     pick_up_pace = {"pick", "up"} <= words and words & lex.PACE
-    if words & lex.FASTER or ("speed" in words and "up" in words) or pick_up_pace:
+    idiom = any(i <= words for i in lex.FASTER_IDIOMS)  # "put your foot down"
+    if words & lex.FASTER or ("speed" in words and "up" in words) or pick_up_pace or idiom:
         return Intent.FOLLOW
     if ("drop" in words and "off" in words) or ("let" in words and "out" in words and words & lex.US):
         return Intent.STOP
-    return None
+    return Intent.STOP if "let" in words and _yields(c) else None
+
+
+def _yields(c: tuple[str, ...]) -> bool:
+    """Letting another road user go by ("let them pass", "let the bus through"): a STOP."""
+    return any(t == "let" and c[k + 1 : k + 2] != () and c[k + 1] not in lex.US
+               and any(w in lex.LET_YIELD for w in c[k + 2 : k + 5]) for k, t in enumerate(c))
 
 
 def _is_copular(c: tuple[str, ...], words: set[str]) -> bool:
@@ -450,8 +491,10 @@ def _clause_mentions(c: tuple[str, ...], alt: bool, ctx: Context) -> list[Mentio
     if not found:
         return _notice(c, words, alt)
     top = max(m.level for m in found)
-    sub_from = _subordinate_start(c) if words & lex.SUBORDINATE else len(c)
-    return [replace(m, subordinate=alt or m.at > sub_from) for m in found if m.level == top]
+    found = [m for m in found if m.level == top]
+    if not words & lex.SUBORDINATE:
+        return [replace(m, subordinate=alt) for m in found]
+    return _subordinate(c, found, alt)
 
 
 def _notice(c: tuple[str, ...], words: set[str], alt: bool) -> list[Mention]:
@@ -461,19 +504,27 @@ def _notice(c: tuple[str, ...], words: set[str], alt: bool) -> list[Mention]:
 
 def _is_notice(c: tuple[str, ...], words: set[str]) -> bool:
     """A caution notice ("watch out for pedestrians", "stop sign ahead", "slow down", "yield")."""
-    if words & lex.CAUTION or ("look" in words and "out" in words) or ("give" in words and "way" in words):
-        return True
+    if words & lex.CAUTION or any(pair <= words for pair in lex.CAUTION_PAIRS):
+        return True  # "watch out", "give way", "heads up", "keep an eye out for cyclists"
     if "slow" in words and ("down" in words or c[0] == "slow"):
         return True
-    if words & lex.DECELERATE or (words & lex.SPEED and words & lex.LESS) or {"heads", "up"} <= words:
-        return True  # "decelerate", "reduce your speed", "easy on the gas", "heads up"
+    if words & lex.DECELERATE or (words & lex.SPEED and words & lex.LESS):
+        return True  # "decelerate", "drive slower", "reduce your speed", "easy on the gas"
     hazard = words & lex.HAZARD or words & lex.LIGHTS or ("stop" in words and "sign" in words)
     return bool(hazard and words & lex.APPROACH)
 
 
-def _subordinate_start(c: tuple[str, ...]) -> int:
-    """Index of the first subordinating word ("after", "before", "when", ...) of the clause."""
-    return next(k for k, t in enumerate(c) if t in lex.SUBORDINATE)
+def _subordinate(c: tuple[str, ...], found: list[Mention], alt: bool) -> list[Mention]:
+    """Mark the mentions of the clause's condition subordinate: from its subordinating word up to an
+    imperative after it ("once clear turn left": the left turn is the main clause's). A stop or
+    wait before a maneuver is its precondition: "wait for a gap before you turn left" is the turn."""
+    start = next(k for k, t in enumerate(c) if t in lex.SUBORDINATE)
+    end = next((k for k in range(start + 2, len(c)) if _imperative(c, k, start)), len(c))
+    out = [replace(m, subordinate=alt or start < m.at < end) for m in found]
+    main = [m for m in out if not m.subordinate]
+    if alt or c[start] not in lex.DEFERRING or not main or any(m.intent is not Intent.STOP for m in main):
+        return out
+    return [replace(m, subordinate=False) if m.intent in _MANEUVERS else m for m in out]
 
 
 def _drop_alternatives(c: tuple[str, ...], found: list[Mention]) -> list[Mention]:
@@ -499,10 +550,48 @@ def choose(found: list[Mention]) -> Intent:
     return Intent.STOP if pool else Intent.UNKNOWN  # only caution notices left
 
 
+def _imperative(c: tuple[str, ...], k: int, start: int) -> bool:
+    """Whether ``c[k]`` opens an imperative after the condition at ``start`` ("once clear turn",
+    "after that head"; not "when you turn", "if you can go")."""
+    that = k == start + 2 and c[start + 1] in lex.THAT
+    return c[k] in lex.IMPERATIVE and (that or c[k - 1] not in lex.NOT_IMPERATIVE_PREV | lex.SUBORDINATE)
+
+
+def _negated(c: tuple[str, ...], ctx: Context) -> list[Mention]:
+    """The maneuvers (implied or explicit) that clause ``c`` negates ("not the first right")."""
+    if not set(c) & lex.NEGATOR_HEADS:
+        return []
+    neg, _ = _negation(c)
+    found = (_mention(c, i, ctx, False, False) for i, t in enumerate(c) if neg[i] and t in lex.TRIGGERS)
+    return [replace(m, at=0) for m in found if m is not None and m.level >= Level.MEDIUM]
+
+
+def _refers_back(c: tuple[str, ...]) -> bool:
+    """A short clause naming "the second / next / other one": the maneuver just negated, again."""
+    return len(c) <= 6 and c[-1] == "one" and any(t in lex.BACK_REFERENCE for t in c)
+
+
+def _continues(c: tuple[str, ...], found: list[Mention]) -> bool:
+    """Whether clause ``c`` ("continue / carry / keep straight (on)", no junction named) continues
+    the turn or lane change before it rather than naming a maneuver of its own."""
+    return (c[0] in lex.CONTINUATION_HEADS and "straight" in c and not set(c) & lex.JUNCTION
+            and any(not m.subordinate and m.level >= Level.MEDIUM and m.intent in _TURNS for m in found))
+
+
 def mentions(tokens: tuple[str, ...]) -> list[Mention]:
-    """Every surviving mention of a normalized instruction, clause by clause in text order."""
+    """Every surviving mention of a normalized instruction, clause by clause in text order; a clause
+    that only refers back ("the second one") takes the maneuver the clause before it negated, and
+    "... and continue straight" after a turn is the turn's continuation (FOLLOW)."""
     ctx = Context.of(set(tokens))
     found: list[Mention] = []
-    for clause, alt in _clauses(tokens):
-        found.extend(_clause_mentions(clause, alt, ctx))
+    before: tuple[str, ...] = ()
+    for clause, opener in _clauses(tokens):
+        own = _clause_mentions(clause, opener == "otherwise", ctx)
+        if not own and before and _refers_back(clause):
+            own = _negated(before, ctx)[-1:]
+        elif opener in lex.CONTINUATION_OPENERS and _continues(clause, found):
+            own = [replace(m, intent=Intent.FOLLOW, level=Level.WEAK) if m.intent is Intent.STRAIGHT else m
+                   for m in own]
+        found.extend(own)
+        before = clause
     return found

@@ -23,19 +23,26 @@ def instruction_dict(ins: Instruction) -> dict:
     return d
 
 
+def _notices(notices: tuple[Notice, ...]) -> list[dict]:
+    return [dict(asdict(n), intent=n.intent.value) for n in notices]
+
+
 def route_document(baseline: InstructionSet, variants: list[InstructionSet],
                    maneuvers: list[Maneuver], meta: dict) -> dict:
-    """The JSON document of one route: ``meta`` keys first, then maneuvers, notices, sets."""
+    """The JSON document of one route: ``meta`` keys first, then maneuvers, notices (the
+    baseline's), sets; a set whose notices are not the baseline's (the ``notice`` family) holds
+    its own."""
     return {
         "format": FORMAT,
         "route_id": baseline.route_id,
         **meta,
         "route_seed": baseline.seed,
         "maneuvers": [dict(asdict(m), intent=m.intent.value) for m in maneuvers],
-        "notices": [dict(asdict(n), intent=n.intent.value) for n in baseline.notices],
+        "notices": _notices(baseline.notices),
         "sets": [
             {"family": s.family, "k": s.k, "seed": s.seed,
-             "instructions": [instruction_dict(i) for i in s.instructions]}
+             "instructions": [instruction_dict(i) for i in s.instructions],
+             **({"notices": _notices(s.notices)} if s.notices != baseline.notices else {})}
             for s in (baseline, *variants)
         ],
     }
@@ -100,8 +107,9 @@ def _check_maneuver(c: DocChecker, m: object, place: str) -> None:
 
 def read_instruction_sets(path: Path) -> list[InstructionSet]:
     """All sequences of a route file: the baseline first, then variants in file order. Every
-    problem (wrong types, unknown family or intent, missing keys, triggers out of order, no
-    baseline first, a (family, k) twice) is an InputError naming the file and the key."""
+    problem (wrong types, unknown family or intent, missing keys, triggers out of order, an
+    instruction id twice in a set, no baseline first, a (family, k) twice) is an InputError
+    naming the file and the key."""
     return read_route_file(path)[0]
 
 
@@ -134,11 +142,38 @@ def read_route_file(path: Path) -> tuple[list[InstructionSet], tuple[Maneuver, .
         seed = c.integer(c.key(s, "seed", place), f"{place}.seed")
         items = c.lst(c.key(s, "instructions", place), f"{place}.instructions")
         instructions = tuple(_instruction(c, d, f"{place}.instructions[{i}]") for i, d in enumerate(items))
+        ids = [ins.id for ins in instructions]
+        if len(set(ids)) < len(ids):
+            i = next(i for i, v in enumerate(ids) if v in ids[:i])
+            raise c.fail(f"{place}.instructions[{i}].id", f"a second instruction with id {ids[i]}",
+                         "give every instruction of a set its own id")
         for i in range(1, len(instructions)):
             if instructions[i].trigger < instructions[i - 1].trigger:
                 raise c.fail(f"{place}.instructions[{i}].trigger",
                              f"trigger {instructions[i].trigger:g} comes before the previous one "
                              f"({instructions[i - 1].trigger:g})", "list instructions by trigger")
+        own = notices if "notices" not in s else tuple(
+            _notice(c, n, f"{place}.notices[{i}]")
+            for i, n in enumerate(c.lst(s["notices"], f"{place}.notices")))
         out.append(InstructionSet(route_id=route_id, family=family, k=k, seed=seed,
-                                  instructions=instructions, notices=notices))
+                                  instructions=instructions, notices=own))
     return out, tuple(maneuvers)
+
+
+def skipped_families(folder: Path) -> dict[str, dict[str, str]]:
+    """Route id -> {family: why} of the delivery families a generated folder (its
+    ``index.json``, ``skipped``) could not build for the route; {} when there is none (or no
+    index)."""
+    path = Path(folder) / "index.json"
+    if not path.is_file():
+        return {}
+    doc = read_json_doc(path, FORMAT.replace("instructions", "instruction-index"), "instruction index",
+                        "run icrsumo generate")
+    c = DocChecker(path, _FIX)
+    out: dict[str, dict[str, str]] = {}
+    for i, row in enumerate(c.lst(doc.get("skipped", []), "skipped")):
+        row = c.obj(row, f"skipped[{i}]")
+        rid, fam, why = (c.string(c.key(row, key, f"skipped[{i}]"), f"skipped[{i}].{key}")
+                         for key in ("route_id", "family", "why"))
+        out.setdefault(rid, {})[fam] = why
+    return out

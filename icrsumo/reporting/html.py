@@ -13,7 +13,7 @@ from icrsumo.core.types import EpisodeLog, EpisodeRecord, InstructionSet
 from icrsumo.results.summary import Summary
 
 from .html_route import Render, esc, route_section
-from .rows import table_cells
+from .rows import ask_note, gain_note, table_cells
 
 _CSS = """
 body{font-family:system-ui,sans-serif;margin:1.5em;color:#222;max-width:1400px}
@@ -84,7 +84,7 @@ def _results(summary: Summary) -> str:
                      f'<td class="l">{esc(fam)}</td>' + "".join(f"<td>{esc(c)}</td>" for c in cells)
                      + "</tr>")
     table.append("</table>")
-    return "".join(table)
+    return "".join(table) + "".join(f"<p>{esc(n)}</p>" for n in (gain_note(summary), ask_note(summary)) if n)
 
 
 def _flip_row(f: Mapping) -> str:

@@ -1,12 +1,12 @@
-"""results.md: the results table (:mod:`icrsumo.reporting.rows`) in Markdown, with the crash
-note under it."""
+"""results.md: the results table (:mod:`icrsumo.reporting.rows`) in Markdown, with its notes
+(the conditioning gain, crashes) under it."""
 
 from __future__ import annotations
 
 from icrsumo.results.summary import Summary
 
 from .cells import md_cell
-from .rows import crash_note, table_cells
+from .rows import notes, table_cells
 
 
 def results_md(summary: Summary) -> str:
@@ -15,7 +15,6 @@ def results_md(summary: Summary) -> str:
     md = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * 2 + ["---:"] * (len(header) - 2)) + "|"]
     for agent, fam, cells in text_rows:
         md.append("| " + " | ".join([md_cell(agent), fam, *cells]) + " |")
-    note = crash_note(summary)
-    if note:
+    for note in notes(summary):
         md += ["", note]
     return "\n".join(md) + "\n"

@@ -1,12 +1,12 @@
 """results.tex: the results table (:mod:`icrsumo.reporting.rows`) in LaTeX with booktabs, a rule
-between agents, the crash note as a comment."""
+between agents, the notes (the conditioning gain, crashes) as comments."""
 
 from __future__ import annotations
 
 from icrsumo.results.summary import Summary
 
 from .cells import tex_escape, tex_num
-from .rows import crash_note, table_cells
+from .rows import ASKS_HEADER, notes, table_cells
 
 _HEAD = ("Agent", "Family", "DS", "RC", "IS", r"$\Delta$DS [95\% CI]", r"$\Delta$RC [95\% CI]",
          r"$\Delta$IS", r"worst $\Delta$DS", r"RD \%", r"TO \%", "n", "crashed")
@@ -15,7 +15,8 @@ _HEAD = ("Agent", "Family", "DS", "RC", "IS", r"$\Delta$DS [95\% CI]", r"$\Delta
 def results_tex(summary: Summary) -> str:
     """The LaTeX tabular (names escaped, :func:`icrsumo.reporting.cells.tex_escape`)."""
     _, text_rows = table_cells(summary)
-    head = [*_HEAD, *([r"invalid \%"] if summary.has_answers else [])]
+    head = [*_HEAD, *([r"invalid \%"] if summary.has_answers else []),
+            *([tex_escape(h) for h in ASKS_HEADER] if summary.has_asks else [])]
     tex = [r"\begin{tabular}{ll" + "r" * (len(head) - 2) + "}", r"\toprule",
            " & ".join(head) + r" \\", r"\midrule"]
     prev = None
@@ -27,7 +28,5 @@ def results_tex(summary: Summary) -> str:
         tex.append(" & ".join(cells) + r" \\")
         prev = agent
     tex += [r"\bottomrule", r"\end{tabular}"]
-    note = crash_note(summary)
-    if note:
-        tex.append("% " + note)
+    tex += ["% " + note for note in notes(summary)]
     return "\n".join(tex) + "\n"

@@ -32,9 +32,18 @@ Definitions (per agent and family f; crashed episodes are counted and excluded f
 - model_calls, invalid_answers, invalid_rate (only for an agent that asked a language model,
   :mod:`icrsumo.agents.llm`): its questions over the complete pairs' variant episodes (the
   baseline row: over its episodes), the invalid answers among them, and their share;
+- asks, asks_answered, ask_rate, asks_per_episode, answered_rate (only when some episode of the
+  run asked for clarification, :mod:`icrsumo.sim.asking`; then on every row): over the same
+  episodes, the asks and the answered ones in all, the share of the episodes with at least one
+  ask, the mean asks per episode, and the share of the asks that were answered;
 - decisions, adherence, confusion, compliance (families only) and, for a language-model agent,
   answers: the decision statistics of :func:`icrsumo.results.attribution.block_stats` over the row's
-  episodes (when :func:`summarize` is given the episodes' decisions).
+  episodes (when :func:`summarize` is given the episodes' decisions);
+- conditioning_gain (per agent, only when the run has the ``blank`` family): what the
+  instruction is worth against none, baseline − blank on the blank family's complete pairs:
+  the blank row's dDS, dRC, dIS with the sign turned and its dDS / dRC intervals mirrored
+  ([lo, hi] -> [-hi, -lo]: the same resampled routes and seed, so the interval is the bootstrap
+  of baseline − blank); ``n`` pairs on ``n_routes`` routes.
 
 :func:`summarize` returns a typed :class:`icrsumo.results.summary.Summary` (summary.json). Values are
 rounded (4 decimals, IS and dIS 6); a quantity without data is ``None``, never NaN.
@@ -56,11 +65,14 @@ from .attribution import Key, answer_confusion, block_stats, episode_key
 from .summary import (
     AgentStats,
     AnswerCounts,
+    AskCounts,
     BaselineStats,
+    ConditioningGain,
     DecisionStats,
     EpisodeCounts,
     FamilyStats,
     Flips,
+    Interval,
     Summary,
 )
 
@@ -68,6 +80,7 @@ if TYPE_CHECKING:
     from .decisions import Decision
 
 BASELINE = Family.BASELINE
+BLANK = Family.BLANK
 
 _Key = tuple[str, int]  # (route_id, seed): the pairing unit
 
@@ -134,6 +147,14 @@ def _answers(recs: Sequence[EpisodeRecord]) -> AnswerCounts:
     return AnswerCounts(calls, bad, _rnd(bad / calls) if calls else None)
 
 
+def _asks(recs: Sequence[EpisodeRecord]) -> AskCounts:
+    """The asks for clarification over ``recs`` (:class:`AskCounts`)."""
+    asks = sum(r.asks for r in recs)
+    answered = sum(r.asks_answered for r in recs)
+    return AskCounts(asks, answered, _mean([r.asks > 0 for r in recs]), _mean([r.asks for r in recs]),
+                     _rnd(answered / asks) if asks else None)
+
+
 @dataclass(frozen=True)
 class _Pairs:
     """One agent's complete pairs of one family: the family's finished episodes (``finished``),
@@ -192,7 +213,7 @@ def _deltas(p: _Pairs, n_boot: int, boot_seed: int) -> dict[str, Any]:
 
 
 def _family_stats(p: _Pairs, *, p_value: float | None, n_boot: int, boot_seed: int, n_crashed: int,
-                  answers: bool, decisions: DecisionStats | None) -> FamilyStats:
+                  answers: bool, asking: bool, decisions: DecisionStats | None) -> FamilyStats:
     ds, rc, is_, rd, to = _absolute(p.paired)
     return FamilyStats(
         ds=ds, rc=rc, is_=is_, base_ds=_mean([b.ds for b in p.pair_base]),
@@ -201,7 +222,22 @@ def _family_stats(p: _Pairs, *, p_value: float | None, n_boot: int, boot_seed: i
         n_routes=len(p.deltas), baseline_done_variant_failed=p.failed_routes,
         n_pairs=int(sum(len(d) for d in p.deltas)), n_crashed=int(n_crashed),
         unpaired=p.finished - len(p.paired), flips=Flips(p.lost, p.gained), p_value=p_value,
-        answers=_answers(p.paired) if answers else None, decisions=decisions)
+        answers=_answers(p.paired) if answers else None, decisions=decisions,
+        asking=_asks(p.paired) if asking else None)
+
+
+def _turned(x: float | None) -> float | None:
+    return None if x is None else 0.0 - x  # exact, and 0.0 stays 0.0
+
+
+def conditioning_gain(blank: FamilyStats) -> ConditioningGain:
+    """The conditioning gain (baseline − blank) from an agent's ``blank`` row: its paired deltas
+    with the sign turned, its intervals mirrored (None stays None)."""
+    def mirrored(ci: Interval | None) -> Interval | None:
+        return None if ci is None else (_turned(ci[1]), _turned(ci[0]))
+
+    return ConditioningGain(_turned(blank.d_ds), _turned(blank.d_rc), _turned(blank.d_is),
+                            mirrored(blank.d_ds_ci95), mirrored(blank.d_rc_ci95), blank.n, blank.n_routes)
 
 
 def relative_drop(base_mean: float, delta_mean: float) -> float | None:
@@ -257,8 +293,9 @@ class _Attribution:
 
 
 def _agent_stats(recs: list[EpisodeRecord], fams: tuple[str, ...], n_boot: int, boot_seed: int,
-                 attribution: _Attribution | None) -> AgentStats:
-    """One agent's rows from its records ``recs`` (crashed ones included)."""
+                 attribution: _Attribution | None, asking: bool = False) -> AgentStats:
+    """One agent's rows from its records ``recs`` (crashed ones included); ``asking``: every
+    row counts its asks for clarification."""
     crashed = Counter(r.family for r in recs if r.status == "crashed")
     mine = [r for r in recs if r.status != "crashed"]
     base_recs = [r for r in mine if r.family == BASELINE]
@@ -273,12 +310,13 @@ def _agent_stats(recs: list[EpisodeRecord], fams: tuple[str, ...], n_boot: int, 
     pairs = {f: _Pairs.of([r for r in mine if r.family == f], base) for f in fams}
     adjusted = holm([pairs[f].p_value_raw for f in fams])
     families = {f: _family_stats(pairs[f], p_value=_rnd(p, 6), n_boot=n_boot, boot_seed=boot_seed,
-                                 n_crashed=crashed[f], answers=asked, decisions=decisions(f))
+                                 n_crashed=crashed[f], answers=asked, asking=asking, decisions=decisions(f))
                 for f, p in zip(fams, adjusted)}
     ds, rc, is_, rd, to = _absolute(base_recs)
     baseline = BaselineStats(ds, rc, is_, rd, to, len(base_recs), crashed[BASELINE],
-                             _answers(base_recs) if asked else None, decisions(BASELINE))
-    return AgentStats(baseline, families)
+                             _answers(base_recs) if asked else None, decisions(BASELINE),
+                             _asks(base_recs) if asking else None)
+    return AgentStats(baseline, families, conditioning_gain(families[BLANK]) if BLANK in families else None)
 
 
 def summarize(records: Iterable[EpisodeRecord], *, suite: str, seed: int, k: int,
@@ -305,7 +343,9 @@ def summarize(records: Iterable[EpisodeRecord], *, suite: str, seed: int, k: int
     recs = [r for r in _sorted_unique(records) if r.family == BASELINE or r.family in fams]
     n_crashed = sum(r.status == "crashed" for r in recs)
     attribution = None if decisions is None else _Attribution(decisions, answers)
-    agents = {agent: _agent_stats([r for r in recs if r.agent == agent], fams, n_boot, boot_seed, attribution)
+    asking = any(r.asks for r in recs)
+    agents = {agent: _agent_stats([r for r in recs if r.agent == agent], fams, n_boot, boot_seed, attribution,
+                                  asking)
               for agent in sorted({r.agent for r in recs})}
     episodes = EpisodeCounts(len(recs) - n_crashed, n_crashed, rescored_short, not_in_report,
                              not_in_report_why)

@@ -13,7 +13,10 @@ speed to 1e-3 m/s, step_length to 1e-6 s), so the same episode always gives the 
 already-rounded logs round-trip exactly. Version 2 holds what the leaderboard's rules need to
 rescore the episode (:mod:`icrsumo.scoring`): the route polyline,
 the OutsideRouteLanesTest bits per step and a contact event per step of contact; version 1 logs
-cannot be rescored and are refused. Malformed input raises :class:`~icrsumo.core.errors.InputError`
+cannot be rescored and are refused. Optional keys after ``events``, present only when they have
+entries: ``model_calls``, ``guard`` and ``asks`` (the agent's asks for clarification, one object
+``{"t", "progress", "answered", "instruction_id"}`` each: :class:`~icrsumo.core.types.Ask`).
+Malformed input raises :class:`~icrsumo.core.errors.InputError`
 naming the key.
 """
 
@@ -29,6 +32,7 @@ from icrsumo.core.errors import KIND_NAMES, Field, InputError, short
 from icrsumo.core.fsio import dumps_json, read_text, write_atomic
 from icrsumo.core.types import (
     TERMINATIONS,
+    Ask,
     EpisodeLog,
     EpisodeResult,
     Event,
@@ -63,7 +67,11 @@ OPTIONAL_COLUMNS = ("traffic_speed", "speed_limit")
 EVENT_FIELDS: dict[str, int | None] = {"kind": None, "t": 3, "pos": 2, "other": None, "x": 2, "y": 2}
 
 _HEADER = ("version", "route_id", "agent", "family", "k", "seed", "step_length", "route_length",
-           "termination", "termination_t", "message", "route", "steps", "events", "model_calls", "guard")
+           "termination", "termination_t", "message", "route", "steps", "events", "model_calls", "guard",
+           "asks")
+
+#: the fields of one entry of ``asks`` (an object each), in stored order
+ASK_FIELDS = ("t", "progress", "answered", "instruction_id")
 
 #: the fields of one entry of ``guard`` (an object each), in stored order
 GUARD_FIELDS = ("t", "progress", "instruction_id", "verdict", "reason")
@@ -121,7 +129,34 @@ def log_to_dict(log: EpisodeLog) -> dict[str, Any]:
         **({"model_calls": [_call_to_dict(c, i) for i, c in enumerate(log.model_calls)]}
            if log.model_calls else {}),
         **({"guard": [_guard_to_dict(g, i) for i, g in enumerate(log.guard)]} if log.guard else {}),
+        **({"asks": [_ask_to_dict(a, i) for i, a in enumerate(log.asks)]} if log.asks else {}),
     }
+
+
+def ask_counts(log: EpisodeLog) -> tuple[int, int]:
+    """(asks, answered) of an episode: every ask for clarification the agent made, and how many
+    the navigator answered (at most one per maneuver). (0, 0) without asking."""
+    return len(log.asks), sum(a.answered for a in log.asks)
+
+
+def _ask_to_dict(a: Ask, i: int) -> dict[str, Any]:
+    return {"t": _r(a.t, 3, f"asks[{i}].t"), "progress": _r(a.progress, 2, f"asks[{i}].progress"),
+            "answered": bool(a.answered), "instruction_id": int(a.instruction_id)}
+
+
+def _asks_from(rd: _LogChecker, raw: Any) -> tuple[Ask, ...]:
+    rd.lst(raw, "asks")
+    out = []
+    for i, a in enumerate(raw):
+        at = f"asks[{i}]"
+        if not isinstance(a, dict) or set(a) != set(ASK_FIELDS):
+            raise rd.fail(at, f"expected an object with keys {', '.join(ASK_FIELDS)}")
+        if not isinstance(a["answered"], bool):
+            raise rd.fail(f"{at}.answered", f"expected true or false, got {short(a['answered'])}")
+        out.append(Ask(t=rd.number(a["t"], f"{at}.t"), progress=rd.number(a["progress"], f"{at}.progress"),
+                       answered=a["answered"],
+                       instruction_id=rd.integer(a["instruction_id"], f"{at}.instruction_id")))
+    return tuple(out)
 
 
 def _call_to_dict(c: ModelCall, i: int) -> dict[str, Any]:
@@ -302,6 +337,7 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
         speed_limit=cols["speed_limit"],
         model_calls=_calls_from(rd, d["model_calls"]) if "model_calls" in d else (),
         guard=_guard_from(rd, d["guard"]) if "guard" in d else (),
+        asks=_asks_from(rd, d["asks"]) if "asks" in d else (),
     )
 
 

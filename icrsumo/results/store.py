@@ -37,6 +37,9 @@ CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 
 #: integer columns that count things (0 when a store written before them has NULL)
 _COUNTS = ("model_calls", "invalid_answers", "guard_checked", "guard_blocked")
+#: counts a store has only once an episode with one of them was stored (asks for clarification:
+#: a store of runs without asking keeps the columns it always had); 0 where absent
+_LATE_COUNTS = ("asks", "asks_answered")
 
 #: bytes free under which an SQLite I/O error is taken as the disk being full
 _FULL_BELOW = 1 << 20
@@ -262,9 +265,11 @@ class ResultStore:
         self._claimed = dict(fingerprints)
         return unmarked
 
-    def _add_columns(self) -> None:
+    def _add_columns(self, late: bool = False) -> None:
+        """The columns a store written by an earlier icrsumo lacks; ``late``: the
+        :data:`_LATE_COUNTS` too."""
         for col, decl in (("outside_m", "REAL DEFAULT 0"), ("fingerprint", "TEXT DEFAULT ''"),
-                          *((c, "INTEGER DEFAULT 0") for c in _COUNTS)):
+                          *((c, "INTEGER DEFAULT 0") for c in (*_COUNTS, *(_LATE_COUNTS if late else ())))):
             if col not in self._cols:
                 self._db.execute(f"ALTER TABLE episodes ADD COLUMN {col} {decl}")
                 self._cols.add(col)
@@ -276,9 +281,9 @@ class ResultStore:
         row["infractions"] = json.dumps([list(i) for i in rec.infractions])
         row["log"] = zlib.compress(log_json.encode("utf-8"), 6) if log_json else None
         row["fingerprint"] = self._claimed.get(rec.agent, "")
-        cols = _COLUMNS + ["log", "fingerprint"]
         with self._guard("writing"):
-            self._add_columns()
+            self._add_columns(late=any(row[c] for c in _LATE_COUNTS))
+            cols = [c for c in _COLUMNS if c not in _LATE_COUNTS or c in self._cols] + ["log", "fingerprint"]
             self._db.execute(
                 f"INSERT OR REPLACE INTO episodes ({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})",
                 [row[c] for c in cols],
@@ -305,14 +310,14 @@ class ResultStore:
             d = dict(zip(cols, r))
             if d.get("outside_m") is None:
                 d["outside_m"] = 0.0
-            for c in _COUNTS:
+            for c in (*_COUNTS, *_LATE_COUNTS):
                 if d.get(c) is None:
                     d[c] = 0
             try:
                 if d["status"] == "done" and None in (d["ds"], d["rc"], d["is_"]):
                     raise TypeError("a finished episode without its scores")
                 for c in ("ds", "rc", "is_", "length", "duration", "k", "seed", "attempts", "outside_m",
-                          *_COUNTS):
+                          *_COUNTS, *_LATE_COUNTS):
                     if d[c] is not None and (not isinstance(d[c], (int, float)) or not math.isfinite(d[c])):
                         raise TypeError(f"{c} is {d[c]!r}, not a finite number")
                 raw = json.loads(d["infractions"] or "[]")

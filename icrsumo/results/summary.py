@@ -10,7 +10,9 @@ Fields are the JSON keys in snake case (``DS`` -> ``ds``, ``IS`` -> ``is_``, ``d
 ``d_ds_ci95``, ``worst_dDS`` -> ``worst_d_ds``). A quantity without data is None (JSON null). The
 optional parts are None where the JSON has none of their keys: ``answers`` (a language-model
 agent's questions), ``decisions`` (the decision statistics of :mod:`icrsumo.results.attribution`),
-``scoring`` and ``digest`` (written together).
+``scoring`` and ``digest`` (written together), an agent's ``conditioning_gain`` (only when the
+run has the ``blank`` family) and ``asking`` (asks for clarification: on every row when some
+episode of the run asked).
 """
 
 from __future__ import annotations
@@ -51,6 +53,24 @@ class AnswerCounts:
 
 
 @dataclass(frozen=True)
+class AskCounts:
+    """Asks for clarification (:mod:`icrsumo.sim.asking`) over a row's episodes: ``asks`` and
+    ``asks_answered`` in all, ``ask_rate`` (the share of the episodes with at least one ask),
+    ``asks_per_episode`` (their mean) and ``answered_rate`` (the share of the asks the navigator
+    answered); a rate is None without an episode, ``answered_rate`` without an ask."""
+
+    asks: int
+    asks_answered: int
+    ask_rate: float | None
+    asks_per_episode: float | None
+    answered_rate: float | None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"asks": self.asks, "asks_answered": self.asks_answered, "ask_rate": self.ask_rate,
+                "asks_per_episode": self.asks_per_episode, "answered_rate": self.answered_rate}
+
+
+@dataclass(frozen=True)
 class DecisionStats:
     """The decisions of a row's episodes (:func:`icrsumo.results.attribution.block_stats`): outcome ->
     count, ``adherence``, ``confusion``, ``compliance`` (families only: None for the baseline,
@@ -87,9 +107,11 @@ class BaselineStats:
     n_crashed: int
     answers: AnswerCounts | None = None
     decisions: DecisionStats | None = None
+    asking: AskCounts | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {**_plain(self, _BASELINE_KEYS), **(self.answers.to_dict() if self.answers else {}),
+                **(self.asking.to_dict() if self.asking else {}),
                 **(self.decisions.to_dict(compliance=False) if self.decisions else {})}
 
 
@@ -100,6 +122,25 @@ class Flips:
 
     lost: int
     gained: int
+
+
+@dataclass(frozen=True)
+class ConditioningGain:
+    """What the instruction is worth to an agent against none (doScenes' "instruction
+    conditioning gain"): baseline − blank, paired on route and seed over the blank family's
+    complete pairs, i.e. its row's paired deltas with the sign turned (``ds`` = −dDS, the 95 %
+    bootstrap intervals mirrored); ``n`` pairs on ``n_routes`` routes. None without a pair."""
+
+    ds: float | None
+    rc: float | None
+    is_: float | None
+    ds_ci95: Interval | None
+    rc_ci95: Interval | None
+    n: int
+    n_routes: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return _plain(self, _GAIN_KEYS)
 
 
 @dataclass(frozen=True)
@@ -134,11 +175,17 @@ class FamilyStats:
     p_value: float | None
     answers: AnswerCounts | None = None
     decisions: DecisionStats | None = None
+    #: routes of the evaluation the family could not be built for (a delivery family; written
+    #: only when not 0)
+    skipped_routes: int = 0
+    asking: AskCounts | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {**_plain(self, _FAMILY_KEYS), "flips": {"lost": self.flips.lost, "gained": self.flips.gained},
-                **(self.answers.to_dict() if self.answers else {}), "p_value": self.p_value,
-                **(self.decisions.to_dict(compliance=True) if self.decisions else {})}
+                **(self.answers.to_dict() if self.answers else {}),
+                **(self.asking.to_dict() if self.asking else {}), "p_value": self.p_value,
+                **(self.decisions.to_dict(compliance=True) if self.decisions else {}),
+                **({"skipped_routes": self.skipped_routes} if self.skipped_routes else {})}
 
 
 #: a row of the tables: the baseline's or a family's
@@ -158,22 +205,31 @@ _FAMILY_KEYS = (
     ("rd", "RD", "number"), ("to", "TO", "number"), ("n", "n", "count"), ("n_routes", "n_routes", "count"),
     ("baseline_done_variant_failed", "baseline_done_variant_failed", "count"),
     ("n_pairs", "n_pairs", "count"), ("n_crashed", "n_crashed", "count"), ("unpaired", "unpaired", "count"))
+_GAIN_KEYS = (("ds", "DS", "number"), ("rc", "RC", "number"), ("is_", "IS", "number"),
+              ("ds_ci95", "DS_ci95", "interval"), ("rc_ci95", "RC_ci95", "interval"), ("n", "n", "count"),
+              ("n_routes", "n_routes", "count"))
 
 
 @dataclass(frozen=True)
 class AgentStats:
-    """One agent: its baseline row and one row per family (in the summary's family order)."""
+    """One agent: its baseline row, one row per family (in the summary's family order) and its
+    ``conditioning_gain`` (None when the run has no ``blank`` family; summary.json then has no
+    such key)."""
 
     baseline: BaselineStats
     families: Mapping[str, FamilyStats]
+    conditioning_gain: ConditioningGain | None = None
 
     def blocks(self) -> list[tuple[str, Block]]:
         """(family, row) for the baseline first, then every family."""
         return [(BASELINE, self.baseline), *self.families.items()]
 
     def to_dict(self) -> dict[str, Any]:
-        return {"baseline": self.baseline.to_dict(),
-                "families": {f: b.to_dict() for f, b in self.families.items()}}
+        out: dict[str, Any] = {"baseline": self.baseline.to_dict(),
+                               "families": {f: b.to_dict() for f, b in self.families.items()}}
+        if self.conditioning_gain is not None:
+            out["conditioning_gain"] = self.conditioning_gain.to_dict()
+        return out
 
 
 @dataclass(frozen=True)
@@ -225,6 +281,16 @@ class Summary:
         """Whether an agent asked a language model (its rows carry :class:`AnswerCounts`)."""
         return any(a.baseline.answers is not None for a in self.agents.values())
 
+    @property
+    def has_asks(self) -> bool:
+        """Whether an agent asked for clarification in the run (its rows carry :class:`AskCounts`)."""
+        return any(a.baseline.asking is not None for a in self.agents.values())
+
+    @property
+    def has_conditioning_gain(self) -> bool:
+        """Whether an agent has a :class:`ConditioningGain` (the run has the blank family)."""
+        return any(a.conditioning_gain is not None for a in self.agents.values())
+
     def to_dict(self) -> dict[str, Any]:
         """The JSON document (plain dicts and lists), keys in summary.json's order."""
         out: dict[str, Any] = {
@@ -268,7 +334,7 @@ def _nested(table: Confusion) -> dict[str, dict[str, int]]:
     return {k: dict(v) for k, v in table.items()}
 
 
-def _plain(row: Block, keys: tuple[tuple[str, str, str], ...]) -> dict[str, Any]:
+def _plain(row: Block | ConditioningGain, keys: tuple[tuple[str, str, str], ...]) -> dict[str, Any]:
     """The plain values of ``row`` by their JSON keys (an interval as a list)."""
     out = {key: getattr(row, name) for name, key, _ in keys}
     return {key: list(v) if isinstance(v, tuple) else v for key, v in out.items()}
@@ -308,6 +374,13 @@ class _Reader(DocChecker):
         return AnswerCounts(self.count(d, "model_calls", at), self.count(d, "invalid_answers", at),
                             self.opt_number(d, "invalid_rate", at))
 
+    def asking(self, d: dict, at: str) -> AskCounts | None:
+        if "asks" not in d:
+            return None
+        return AskCounts(self.count(d, "asks", at), self.count(d, "asks_answered", at),
+                         self.opt_number(d, "ask_rate", at), self.opt_number(d, "asks_per_episode", at),
+                         self.opt_number(d, "answered_rate", at))
+
     def decisions(self, d: dict, at: str) -> DecisionStats | None:
         if "decisions" not in d:
             return None
@@ -319,14 +392,14 @@ class _Reader(DocChecker):
                              compliance, answers)
 
     def plain(self, d: dict, keys: tuple[tuple[str, str, str], ...], at: str) -> dict[str, Any]:
-        """Field -> value of a row's plain values (:data:`_FAMILY_KEYS`)."""
+        """Field -> value of a row's plain values (:data:`_FAMILY_KEYS`, :data:`_GAIN_KEYS`)."""
         read = {"number": self.opt_number, "count": self.count, "interval": self.interval}
         return {name: read[kind](d, key, at) for name, key, kind in keys}
 
     def baseline(self, d: Any, at: str) -> BaselineStats:
         d = self.obj(d, at)
         return BaselineStats(**self.plain(d, _BASELINE_KEYS, at), answers=self.answers(d, at),
-                             decisions=self.decisions(d, at))
+                             decisions=self.decisions(d, at), asking=self.asking(d, at))
 
     def family(self, d: Any, at: str) -> FamilyStats:
         d = self.obj(d, at)
@@ -334,13 +407,20 @@ class _Reader(DocChecker):
         return FamilyStats(**self.plain(d, _FAMILY_KEYS, at),
                            flips=Flips(self.count(flips, "lost", place), self.count(flips, "gained", place)),
                            p_value=self.opt_number(d, "p_value", at), answers=self.answers(d, at),
-                           decisions=self.decisions(d, at))
+                           decisions=self.decisions(d, at),
+                           skipped_routes=self.count(d, "skipped_routes", at) if "skipped_routes" in d else 0,
+                           asking=self.asking(d, at))
 
     def agent(self, d: Any, at: str) -> AgentStats:
         d = self.obj(d, at)
         fams = self.obj(self.key(d, "families", at), f"{at}.families")
         return AgentStats(self.baseline(self.key(d, "baseline", at), f"{at}.baseline"),
-                          {f: self.family(b, f"{at}.families.{f}") for f, b in fams.items()})
+                          {f: self.family(b, f"{at}.families.{f}") for f, b in fams.items()},
+                          self.gain(d.get("conditioning_gain"), f"{at}.conditioning_gain"))
+
+    def gain(self, v: Any, at: str) -> ConditioningGain | None:
+        """An agent's conditioning gain (None: no key, or null)."""
+        return None if v is None else ConditioningGain(**self.plain(self.obj(v, at), _GAIN_KEYS, at))
 
     def episodes(self, d: Any) -> EpisodeCounts:
         d = self.obj(d, "episodes")

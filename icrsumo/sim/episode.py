@@ -11,7 +11,8 @@ turn it into events and readings; the step is recorded; the run-ending rules
 agent gets an observation: BEV raster, speed, active instruction with ``[x]`` filled, notice
 (the surroundings are read, and the BEV rendered, only then). Instructions are issued online
 from the ego's progress: the active one is the last whose trigger (m) has been passed, the
-same triggers for every variant.
+same triggers for every variant. With asking on (``RunOptions.asking``) an action's ``ask`` goes
+to the navigator (:mod:`icrsumo.sim.asking`), whose answer the agent then reads for a while.
 
 Side effects (the log's columns, timings, video) are :mod:`callbacks <icrsumo.sim.callbacks>`.
 """
@@ -26,18 +27,21 @@ from functools import cache
 from pathlib import Path
 
 from icrsumo.agents.base import Action, Agent, EpisodeInfo, Observation, World, validate_action
+from icrsumo.core.errors import Field, InputError
 from icrsumo.core.types import EgoRoute, EpisodeLog, Event, InstructionSet
-from icrsumo.core.vocab import EventKind, Termination
+from icrsumo.core.vocab import EventKind, Family, Termination
 from icrsumo.guards.base import Guard, guarded_name
 from icrsumo.guards.stream import GuardedStream
+from icrsumo.instructions.maneuvers import extract_maneuvers
 from icrsumo.render import BevRenderer, BevSpec
 from icrsumo.scoring import get_scoring
 from icrsumo.scoring.criteria import TerminationMonitor
 from icrsumo.scoring.route import DenseRoute
 from icrsumo.world.dynamics import Control, EgoState, VehicleParams, step
-from icrsumo.world.networks import load_net
+from icrsumo.world.networks import RoadNet, load_net
 from icrsumo.world.scenario import Scenario
 
+from .asking import ASK_DELAY, Navigator
 from .backend import SimulatorError, SumoBackend
 from .callbacks import EpisodeCallback, LogRecorder, StepRecord
 from .control import WaypointController, WaypointPath
@@ -53,12 +57,16 @@ CONTROL_EVERY = 2
 @dataclass(frozen=True)
 class RunOptions:
     """Episode options: agent rate (``control_every`` SUMO steps per agent decision), the
-    BEV spec of the agent's raster (it changes what the agent sees, never the scoring) and the
-    scoring whose route criteria end the episode (:data:`icrsumo.scoring.SCORINGS`)."""
+    BEV spec of the agent's raster (it changes what the agent sees, never the scoring), the
+    scoring whose route criteria end the episode (:data:`icrsumo.scoring.SCORINGS`) and
+    ``asking``: whether the navigator answers the agent's asks (``Action.ask``), ``ask_delay``
+    simulated seconds later (:mod:`icrsumo.sim.asking`; off: asks are ignored)."""
 
     control_every: int = CONTROL_EVERY
     bev: BevSpec = BevSpec()
     scoring: str = "lb1"
+    asking: bool = False
+    ask_delay: float = ASK_DELAY
 
 
 @cache
@@ -85,13 +93,15 @@ class Episode:
     episode has ended (``termination`` says why). ``log(agent)`` is the :class:`EpisodeLog` so
     far. ``close()`` (or leaving the ``with`` block) ends the SUMO session.
     ``privileged``: observations carry the :class:`World` view (built-in agents only);
-    ``needs_route``: that view includes the route (the route-oracle only).
+    ``needs_route``: that view includes the route (the route-oracle only). With
+    ``options.asking``, ``baseline`` (the route's baseline sequence; ``instructions`` itself when
+    it is the baseline) words the navigator's answers.
     """
 
     def __init__(self, scenario: Scenario, instructions: InstructionSet,
                  options: RunOptions = RunOptions(), *, privileged: bool = False,  # noqa: B008
                  needs_route: bool = False, callbacks: Sequence[EpisodeCallback] = (),
-                 guard: Guard | None = None) -> None:
+                 guard: Guard | None = None, baseline: InstructionSet | None = None) -> None:
         self.scenario, self.instructions = scenario, instructions
         self.options, self.privileged, self.needs_route = options, privileged, needs_route
         self.net = net = load_net(scenario.net)
@@ -115,11 +125,14 @@ class Episode:
         self.notices = instructions.notices
         #: the instruction guard between the stream and the agent (None: every one is shown)
         self.guarded = None if guard is None else GuardedStream(guard, scenario, net, self.instr, self.texts)
+        #: the navigator that answers the agent's asks (None: asking is off)
+        self.navigator = _navigator(scenario, net, instructions, baseline, options.ask_delay) \
+            if options.asking else None
         self.controller = WaypointController(params)
         #: what the agent is told at reset
         self.info = EpisodeInfo(route_id=scenario.route_id, town=scenario.town, net=str(scenario.net),
                                 step_length=self.dt, control_dt=self.dt * options.control_every,
-                                seed=scenario.seed)
+                                seed=scenario.seed, asking=options.asking)
         #: the log's columns and events (always attached, first)
         self.recorder = LogRecorder()
         self.callbacks: tuple[EpisodeCallback, ...] = (self.recorder, *callbacks)
@@ -212,6 +225,8 @@ class Episode:
         if self.done or self.backend is None:
             raise RuntimeError("the episode has ended (or was never started)")
         self.action = validate_action(action)
+        if self.action.ask and self.navigator is not None:
+            self.navigator.ask(self.frame.t, self.progress)
         # the waypoints' polyline, prepared once for the steps the action is held
         self._path = None if self.action.control is not None else WaypointPath(self.action.waypoints)
         try:
@@ -306,10 +321,12 @@ class Episode:
                           vehicles=frame.vehicles, pedestrians=frame.pedestrians,
                           tl_states=frame.tl_states, route=self.ego_route if self.needs_route else None,
                           progress=progress)
-        obs = Observation(t=frame.t, bev=bev, speed=state.speed,
-                          instruction=self._text(k_instr),
-                          instruction_id=self.instr[k_instr].id if k_instr >= 0 else -1,
-                          notice=notice, world=world)
+        text, iid = self._text(k_instr), self.instr[k_instr].id if k_instr >= 0 else -1
+        answer = self.navigator.shown(frame.t, self.k_instr) if self.navigator is not None else None
+        if answer is not None:
+            text, iid = answer
+        obs = Observation(t=frame.t, bev=bev, speed=state.speed, instruction=text, instruction_id=iid,
+                          notice=notice, world=world, answer=answer is not None)
         for cb in callbacks:
             cb.on_observation(self, obs)
         return obs
@@ -329,12 +346,26 @@ class Episode:
             termination=self.termination, termination_t=self.term_t, message=self.message,
             route=self.polyline,
             guard=tuple(self.guarded.decisions) if self.guarded is not None else (),
+            asks=tuple(self.navigator.asks) if self.navigator is not None else (),
         )
+
+
+def _navigator(scenario: Scenario, net: RoadNet, instructions: InstructionSet,
+               baseline: InstructionSet | None, delay: float) -> Navigator:
+    """The navigator of an episode with asking on; an InputError without the route's baseline."""
+    if baseline is None and instructions.family == Family.BASELINE:
+        baseline = instructions
+    if baseline is None or baseline.family != Family.BASELINE or baseline.route_id != scenario.route_id:
+        raise InputError(Field("baseline"), scenario.route_id,
+                         "asking needs the route's baseline instructions, whose words answer the agent",
+                         "pass the baseline sequence of this route")
+    return Navigator(extract_maneuvers(scenario, net), baseline.instructions, delay)
 
 
 def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
                 options: RunOptions = RunOptions(),  # noqa: B008
-                callbacks: Sequence[EpisodeCallback] = (), guard: Guard | None = None) -> EpisodeLog:
+                callbacks: Sequence[EpisodeCallback] = (), guard: Guard | None = None,
+                baseline: InstructionSet | None = None) -> EpisodeLog:
     """Drive one episode with ``agent`` and return its log (:class:`icrsumo.core.types.EpisodeLog`).
 
     The agent is reset with the episode's :class:`EpisodeInfo`, then acts on every observation;
@@ -343,10 +374,12 @@ def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
     when it also declares ``needs_route = True``. An agent with an ``episode_calls()`` method
     (one that asks a language model) has what it returns stored as the log's ``model_calls``.
     With a ``guard`` (:mod:`icrsumo.guards`) each new instruction passes it before the agent
-    sees it; its decisions are the log's ``guard`` and the log is named ``AGENT+guard:NAME``."""
+    sees it; its decisions are the log's ``guard`` and the log is named ``AGENT+guard:NAME``.
+    With ``options.asking`` the navigator answers the agent's asks in the words of ``baseline``
+    (the route's baseline sequence); they are the log's ``asks``."""
     with Episode(scenario, instructions, options, privileged=bool(getattr(agent, "privileged", False)),
                  needs_route=bool(getattr(agent, "needs_route", False)), callbacks=callbacks,
-                 guard=guard) as ep:
+                 guard=guard, baseline=baseline) as ep:
         agent.reset(ep.info)
         obs = ep.start()
         hooks = ep.callbacks[1:]  # the recorder needs no act hooks

@@ -572,3 +572,50 @@ def test_an_api_key_that_is_not_printable_ascii_is_one_line_never_shown(monkeypa
     line = err.value.line()
     assert "ICRSUMO_TEST_KEY" in line and "not printable ASCII (character 6 of 14)" in line
     assert "secr" not in line and "\n" not in line
+
+
+# --------------------------------------------------------------------------- asking for clarification
+def test_with_asking_on_the_model_may_answer_ask_and_only_then():
+    from icrsumo.agents.llm import SCHEMA_ASKING, SYSTEM, SYSTEM_ASKING
+
+    s = LLMSettings("m", "http://127.0.0.1:1/v1")
+    plain, asking = build_request(s, "x", SCENE), build_request(s, "x", SCENE, asking=True)
+    assert (plain["messages"][0]["content"], plain["response_format"]["schema"]) == (SYSTEM, SCHEMA)
+    assert asking["messages"][0]["content"] == SYSTEM_ASKING
+    assert asking["response_format"]["schema"] == SCHEMA_ASKING
+    assert "ask = " in SYSTEM_ASKING and "stop, ask>" in SYSTEM_ASKING and "ask =" not in SYSTEM
+    enum = SCHEMA["properties"]["maneuver"]["enum"]
+    assert SCHEMA_ASKING["properties"]["maneuver"]["enum"] == [*enum, "ask"] and "ask" not in enum
+    assert request_hash(plain) != request_hash(asking)   # cached apart
+    assert parse_answer('{"maneuver": "Ask"}', asking=True) is Intent.UNKNOWN
+    with pytest.raises(Invalid, match="not on the menu"):
+        parse_answer('{"maneuver": "ask"}')
+
+
+@pytest.mark.sumo
+def test_an_llm_agent_answering_ask_asks_the_navigator_and_reads_its_answer(cache, server):
+    """tiny_003, ambiguity k=0, asking on, a model that answers "ask" first and "left" after: the
+    agent asks the navigator, the exchange is stored with maneuver unknown, the navigator's answer
+    (the baseline's turn instruction) goes to the model, and the route is completed."""
+    from icrsumo.agents.llm import LLMFollower
+    from icrsumo.evaluation.bundled import bundled_route
+    from icrsumo.instructions.store import read_instruction_sets
+    from icrsumo.scoring import score_episode
+    from icrsumo.sim.episode import RunOptions, run_episode
+    from icrsumo.world.scenario import read_scenario
+
+    sc_dir, instr = bundled_route("tiny_003")
+    sets = {(s.family, s.k): s for s in read_instruction_sets(instr)}
+    base = sets[("baseline", 0)]
+    server.replies = [(200, _chat('{"maneuver": "ask"}'), 0.0), (200, _chat('{"maneuver": "left"}'), 0.0)]
+    agent = LLMFollower(LLMSettings("smollm2", server.endpoint))
+    log = run_episode(read_scenario(sc_dir), sets[("ambiguity", 0)], agent, RunOptions(asking=True),
+                      baseline=base)
+    first = log.model_calls[0]
+    assert (first.maneuver, first.valid) == (Intent.UNKNOWN, True)
+    assert json.loads(first.answer) == {"maneuver": "ask"}
+    assert log.asks and log.asks[0].answered and log.asks[0].t == first.t
+    turn = next(i for i in base.instructions if i.maneuver_pos is not None)
+    told = [c for c in log.model_calls[1:] if json.dumps(turn.rendered()) in c.prompt]
+    assert told and told[0].maneuver is Intent.LEFT
+    assert score_episode(log).termination == "completed"

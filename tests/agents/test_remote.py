@@ -7,6 +7,7 @@ import json
 import threading
 import time
 from contextlib import contextmanager
+from dataclasses import replace
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import numpy as np
@@ -26,6 +27,7 @@ from icrsumo.agents.remote import (
     free_port,
 )
 from icrsumo.app.cli.main import main
+from icrsumo.world.dynamics import Control
 
 INFO = EpisodeInfo("r", "town", "net.xml", 0.05, 0.1, 7)
 
@@ -332,3 +334,80 @@ def test_the_timeout_is_a_deadline_for_the_whole_request():
         with pytest.raises(AgentTimeout, match="agent did not answer within 0.3 s"):
             agent.reset(INFO)
         agent.close()
+
+
+# --------------------------------------------------------------------------- asking for clarification
+def test_asking_travels_both_ways_and_messages_without_it_are_unchanged():
+    from icrsumo.agents.remote import ProtocolError, decode_info, encode_info
+
+    # absent when false: the messages of a run without asking are those of before
+    assert "asking" not in encode_info(INFO) and "answer" not in encode_obs(_obs())
+    assert "ask" not in encode_action(Action(waypoints=np.array([[2.5, 0.0]])))
+    assert decode_info(json.loads(json.dumps(encode_info(INFO)))) == INFO
+    asking = replace(INFO, asking=True)
+    assert encode_info(asking)["asking"] is True and decode_info(encode_info(asking)) == asking
+    answer = replace(_obs(), answer=True)
+    assert decode_obs(json.loads(json.dumps(encode_obs(answer)))).answer is True
+    for action in (Action(waypoints=np.array([[2.5, 0.0]]), target_speed=3.0, ask=True),
+                   Action(control=Control(0.0, 0.5, 0.0), ask=True)):
+        back = decode_action(json.loads(json.dumps(encode_action(action))))
+        assert back.ask is True and decode_action(encode_action(replace(action, ask=False))).ask is False
+    with pytest.raises(ProtocolError, match="action.ask must be true or false, got int"):
+        decode_action({**encode_action(Action(waypoints=np.array([[2.5, 0.0]]))), "ask": 1})
+    with pytest.raises(ProtocolError, match="obs.answer must be true or false, got str"):
+        decode_obs({**encode_obs(_obs()), "answer": "yes"})
+    with pytest.raises(ProtocolError, match="info.asking must be true or false"):
+        decode_info({**encode_info(INFO), "asking": None})
+
+
+class _AskUntilAnswered:
+    """Drives straight on slowly and, when the run lets it ask, asks at every step until the
+    navigator's answer arrives (so the log shows whether info.asking, action.ask and obs.answer
+    all travelled)."""
+
+    name, privileged = "ask-until-answered", False
+
+    def reset(self, info):
+        self.asking, self.answered = info.asking, False
+
+    def act(self, obs):
+        self.answered = self.answered or obs.answer
+        return Action(waypoints=np.array([[2.5, 0.0], [5.0, 0.0]]), target_speed=3.0,
+                      ask=self.asking and not self.answered)
+
+
+@pytest.mark.sumo
+def test_a_remote_agent_asks_and_reads_the_answer_over_http_as_in_process(cache):
+    """The agent behind a real serve-agent server on 127.0.0.1: the same asks and the same log as
+    in-process (info.asking went to it, its asks came back, the answer reached it)."""
+    from icrsumo.agents.hosting.serve import AgentServer
+    from icrsumo.evaluation.bundled import bundled_route
+    from icrsumo.instructions.store import read_instruction_sets
+    from icrsumo.results.logs import dumps_log
+    from icrsumo.sim.episode import RunOptions, run_episode
+    from icrsumo.world.scenario import read_scenario
+
+    sc_dir, instr = bundled_route("tiny_003")
+    sc = read_scenario(sc_dir)
+    sets = {(s.family, s.k): s for s in read_instruction_sets(instr)}
+    local = run_episode(sc, sets[("ambiguity", 0)], _AskUntilAnswered(), RunOptions(asking=True),
+                        baseline=sets[("baseline", 0)])
+    assert len(local.asks) > 5 and sum(a.answered for a in local.asks) == 1
+    register("ask-until-answered", _AskUntilAnswered)
+    try:
+        server = AgentServer("ask-until-answered").start()
+    finally:
+        unregister("ask-until-answered")
+    logs = []
+    try:
+        for options in (RunOptions(asking=True), RunOptions()):
+            agent = RemoteAgent(server.url, "ask-until-answered", timeout=30)
+            logs.append(run_episode(sc, sets[("ambiguity", 0)], agent, options,
+                                    baseline=sets[("baseline", 0)]))
+            agent.close()
+    finally:
+        server.shutdown()
+    remote, off = logs
+    assert dumps_log(remote) == dumps_log(local)
+    # without asking it never asks, and drives as it did
+    assert off.asks == () and dumps_log(off) == dumps_log(replace(local, asks=()))

@@ -187,3 +187,44 @@ def test_an_icrsumo_agent_drives_the_env_through_the_helpers_as_in_evaluate(cach
     assert dumps_log(log) == dumps_log(ref)  # the env and the helpers are evaluate's closed loop
     with pytest.raises(AgentError, match="takes control actions"):
         env.unwrapped.agent_action(Action(waypoints=np.zeros((3, 2))))
+
+
+def test_with_asking_the_action_carries_an_ask_and_the_answer_is_observed(cache):
+    """``asking=True``: a Dict action (the drive box and ``ask``); an ask is answered 2 simulated
+    seconds later with the baseline's instruction for the maneuver ahead, observed as the
+    instruction with ``info["answer"]``; the asks are counted in ``info`` and the episode log."""
+    from icrsumo.app.env import ICRDriveEnv, to_observation
+    from icrsumo.core.errors import InputError
+    from icrsumo.sim.asking import ASK_DELAY
+
+    env = gym.make("icrsumo/ICRDrive-v0", family="ambiguity", k=0, asking=True)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env.unwrapped)
+    assert [str(w.message) for w in caught] == []
+    assert set(env.action_space.spaces) == {"control", "ask"}
+    obs, info = env.reset()
+    assert (info["answer"], info["asks"]) == (False, 0)
+    turn = next(i for i in env.unwrapped.sets[("baseline", 0)].instructions if i.maneuver_pos is not None)
+    asked_at = info["t"]
+    obs, _, _, _, info = env.step({"control": _policy(obs), "ask": 1})
+    assert info["asks"] == 1 and not info["answer"] and obs["instruction"] != turn.rendered()
+    while not info["answer"]:
+        obs, _, terminated, truncated, info = env.step({"control": _policy(obs), "ask": 0})
+        assert not (terminated or truncated)
+    assert info["t"] >= asked_at + ASK_DELAY - 1e-9 and info["t"] < asked_at + ASK_DELAY + 0.2
+    assert (obs["instruction"], info["instruction_id"]) == (turn.rendered(), turn.id)
+    assert to_observation(obs, info).answer is True and info["asks"] == 1
+    log = env.unwrapped.episode_log()
+    assert [(a.t, a.answered, a.instruction_id) for a in log.asks] == [(asked_at, True, turn.id)]
+    drive = Action(control=Control(0.0, 0.5, 0.0), ask=True)
+    wanted = env.unwrapped.agent_action(drive)
+    assert wanted["ask"] == 1 and np.array_equal(wanted["control"], np.array([0.0, 0.5, 0.0], np.float32))
+    with pytest.raises(AgentError, match="with asking the action is a dict with keys 'control' and 'ask'"):
+        env.step(_policy(obs))
+    with pytest.raises(AgentError, match=r"action\['ask'\] must be 0 or 1"):
+        env.step({"control": _policy(obs), "ask": 2})
+    env.close()
+    sc, amb = env.unwrapped.scenario, env.unwrapped.sets[("ambiguity", 0)]
+    with pytest.raises(InputError, match="asking: tiny_003: needs the route's baseline instruction sequence"):
+        ICRDriveEnv(sc, amb, family="ambiguity", asking=True)

@@ -5,10 +5,11 @@ from __future__ import annotations
 import csv
 import io
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
-from records_example import FAMS, rec, tiny  # tests/ is on pytest's pythonpath
+from records_example import FAMS, rec, tiny, with_asks, with_blank  # tests/ is on pytest's pythonpath
 
 from icrsumo.compat.report import (
     delta_bars,
@@ -18,6 +19,8 @@ from icrsumo.compat.report import (
     write_report,
 )
 from icrsumo.core.types import EpisodeLog
+from icrsumo.reporting.html import html_report
+from icrsumo.reporting.rows import table_cells
 from icrsumo.results.aggregate import summarize
 from icrsumo.results.summary import Summary
 
@@ -72,6 +75,81 @@ def test_tables_md_csv_tex(summary):
     assert tex.count(r"\midrule") == 2  # under the header + one between the agents
     assert r"$\Delta$DS [95\% CI]" in tex and r"RD \%" in tex
     assert "$-$41.7" in tex and "$-$62.5" in tex
+
+
+def _md_cells(md: str, start: str) -> list[str]:
+    row = next(line for line in md.splitlines() if line.startswith(start))
+    return [c.strip() for c in row.strip("|").split("|")]
+
+
+def test_the_tables_show_the_conditioning_gain_with_the_blank_family(summary):
+    s = summarize(with_blank(), suite="g", seed=7, k=8, families=("misleading", "blank"), n_boot=500)
+    g = s.agents["A"].conditioning_gain
+    t = tables(s)
+    md = t["md"]
+    cells = _md_cells(md, "| A | conditioning gain |")  # after A's families, before O's baseline
+    assert md.index("| A | blank |") < md.index("| A | conditioning gain |") < md.index("| O | baseline |")
+    assert cells[2:5] == ["—"] * 3 and cells[5] == f"+25.0 [{g.ds_ci95[0]:.1f}, {g.ds_ci95[1]:.1f}]"
+    assert cells[6].startswith("+27.5 [") and cells[7] == "+0.075" and cells[8:] == ["—"] * 3 + ["4", "—"]
+    assert _md_cells(md, "| O | conditioning gain |")[5:8] == ["0.0 [0.0, 0.0]", "0.0 [0.0, 0.0]", "0.000"]
+    assert "\nconditioning gain: what the instruction is worth against none, baseline DS minus blank DS" in md
+
+    rows = {(r["agent"], r["family"]): r for r in csv.DictReader(io.StringIO(t["csv"]))}
+    assert len(rows) == 6  # no row of its own: columns, on the blank rows
+    blank = rows[("A", "blank")]
+    assert (float(blank["gain_DS"]), float(blank["gain_RC"]), float(blank["gain_IS"])) == (25.0, 27.5, 0.075)
+    assert (float(blank["gain_DS_ci95_lo"]), float(blank["gain_DS_ci95_hi"])) == g.ds_ci95
+    assert (float(blank["gain_RC_ci95_lo"]), float(blank["gain_RC_ci95_hi"])) == g.rc_ci95
+    assert rows[("A", "baseline")]["gain_DS"] == "" and rows[("A", "misleading")]["gain_DS"] == ""
+
+    tex = t["tex"]
+    assert " & conditioning gain & -- & -- & -- & +25.0 [" in tex and "% conditioning gain: what" in tex
+    assert tex.count(r"\midrule") == 2
+
+    page = html_report(s, [], {}, lambda r: None, lambda route: {}, lambda route: None, lambda route: None)
+    assert '<td class="l">conditioning gain</td><td>—</td><td>—</td><td>—</td><td>+25.0 [' in page
+    assert "<p>conditioning gain: what the instruction is worth against none" in page
+
+    llm = summarize([replace(r, model_calls=2) for r in with_blank()], suite="g", seed=7, k=8,
+                    families=("blank",), n_boot=50)
+    header, text_rows = table_cells(llm)  # the invalid % column: "—" on the gain row
+    assert all(len(cells) == len(header) - 2 for _, _, cells in text_rows)
+    assert next(cells for _, fam, cells in text_rows if fam == "conditioning gain")[-1] == "—"
+
+    for text in tables(summary).values():  # no blank family: the tables as they were
+        assert "conditioning gain" not in text and "gain_DS" not in text
+
+
+def test_the_ask_columns_appear_only_when_an_agent_asked(summary):
+    s = summarize(with_asks(), suite="tiny", seed=7, k=2, families=FAMS, n_boot=300)
+    t = tables(s)
+    md = t["md"]
+    assert md.splitlines()[0].endswith("| n | crashed | ask % | asks/ep | answered % |")
+    assert _md_cells(md, "| A | baseline |")[-3:] == ["33.3", "0.67", "50.0"]
+    assert _md_cells(md, "| A | paraphrase |")[-3:] == ["33.3", "0.67", "50.0"]
+    assert _md_cells(md, "| A | misleading |")[-3:] == ["—", "—", "—"]
+    assert _md_cells(md, "| B | baseline |")[-3:] == ["0.0", "0.00", "—"]
+    assert "\nask %: the share of the row's episodes (n) in which the agent asked" in md
+
+    rows = {(r["agent"], r["family"]): r for r in csv.DictReader(io.StringIO(t["csv"]))}
+    para = rows[("A", "paraphrase")]
+    assert (para["asks"], para["asks_answered"], para["ask_rate"], para["asks_per_episode"],
+            para["answered_rate"]) == ("4", "2", "0.3333", "0.6667", "0.5")
+    assert rows[("B", "misleading")]["answered_rate"] == ""
+
+    assert r"& crashed & ask \% & asks/ep & answered \% \\" in t["tex"] and "% ask %: the share" in t["tex"]
+    page = html_report(s, [], {}, lambda r: None, lambda route: {}, lambda route: None, lambda route: None)
+    assert "<th>ask %</th><th>asks/ep</th><th>answered %</th></tr>" in page and "<p>ask %: the share" in page
+
+    gain = summarize([replace(r, asks=1) for r in with_blank()], suite="g", seed=7, k=8, families=("blank",),
+                     n_boot=50)
+    header, text_rows = table_cells(gain)  # the gain row: "—" in the ask columns
+    assert all(len(cells) == len(header) - 2 for _, _, cells in text_rows)
+    assert next(cells for _, fam, cells in text_rows if fam == "conditioning gain")[-3:] == ["—"] * 3
+
+    for text in (*tables(summary).values(), html_report(summary, [], {}, lambda r: None, lambda route: {},
+                                                         lambda route: None, lambda route: None)):
+        assert "ask" not in text  # no asks: the tables as they were
 
 
 def test_tex_escapes_underscores():

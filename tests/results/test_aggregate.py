@@ -6,11 +6,11 @@ import random
 
 import numpy as np
 import pytest
-from records_example import FAMS, rec, tiny  # tests/ is on pytest's pythonpath
+from records_example import FAMS, GAINS_A, rec, tiny, with_asks, with_blank  # tests/ is on the pythonpath
 
 from icrsumo.core.types import EpisodeRecord
 from icrsumo.results.aggregate import FAMILIES, bootstrap_ci, episode_table, summarize
-from icrsumo.results.summary import BaselineStats, EpisodeCounts, Flips
+from icrsumo.results.summary import AskCounts, BaselineStats, EpisodeCounts, Flips
 
 
 def test_hand_computed_tiny_example():
@@ -199,3 +199,59 @@ def test_holm_bonferroni():
     assert holm([0.01, 0.04, 0.03]) == pytest.approx([0.03, 0.06, 0.06])
     assert holm([0.5, None, 0.9]) == [1.0, None, 1.0]  # 2 x 0.5, then max(1.0, 1 x 0.9)
     assert holm([]) == []
+
+
+def test_conditioning_gain_is_baseline_minus_blank_paired_on_route_and_seed():
+    s = summarize(with_blank(), suite="g", seed=7, k=8, families=("misleading", "blank"), n_boot=500)
+    g = s.agents["A"].conditioning_gain
+    gains = np.asarray(GAINS_A)  # r5's crashed blank and r1's seed-8 blank are left out
+    assert (g.ds, g.rc, g.is_, g.n, g.n_routes) == (25.0, 27.5, 0.075, 4, 4)
+    expected = bootstrap_ci(gains[:, :2], n_boot=500, seed=2026)  # the bootstrap of baseline − blank
+    assert g.ds_ci95 == (round(expected[0, 0], 4), round(expected[1, 0], 4))
+    assert g.rc_ci95 == (round(expected[0, 1], 4), round(expected[1, 1], 4))
+    assert g.ds_ci95[0] < g.ds < g.ds_ci95[1]
+    blank = s.agents["A"].families["blank"]  # the blank row's Δ, the sign turned
+    assert (blank.d_ds, blank.unpaired, blank.n_crashed) == (-25.0, 1, 1)
+    again = summarize(reversed(with_blank()), suite="g", seed=7, k=8, families=("blank", "misleading"),
+                      n_boot=500)
+    assert again.agents["A"].conditioning_gain == g  # reproducible, whatever the order
+    other = summarize(with_blank(), suite="g", seed=7, k=8, families=("blank",), n_boot=500, boot_seed=1)
+    assert other.agents["A"].conditioning_gain.ds_ci95 != g.ds_ci95  # seeded by boot_seed
+
+    o = s.agents["O"].conditioning_gain  # blind to language: exactly 0, never -0.0
+    assert (o.ds, o.ds_ci95, o.rc_ci95, o.is_, o.n) == (0.0, (0.0, 0.0), (0.0, 0.0), 0.0, 4)
+    assert "-0.0" not in str(s.to_dict()["agents"]["O"]["conditioning_gain"])
+    assert s.to_dict()["agents"]["A"]["conditioning_gain"] == {
+        "DS": 25.0, "RC": 27.5, "IS": 0.075, "DS_ci95": list(g.ds_ci95), "RC_ci95": list(g.rc_ci95), "n": 4,
+        "n_routes": 4}
+
+
+def test_without_the_blank_family_there_is_no_conditioning_gain():
+    s = summarize(with_blank(), suite="g", seed=7, k=8, families=("misleading",), n_boot=100)
+    assert all(a.conditioning_gain is None for a in s.agents.values()) and not s.has_conditioning_gain
+    assert all(set(a) == {"baseline", "families"} for a in s.to_dict()["agents"].values())
+    none = summarize(tiny(), suite="tiny", seed=7, k=2, families=(*FAMS, "blank"), n_boot=100)
+    g = none.agents["A"].conditioning_gain  # the blank family run, but no blank episode: no pair
+    assert (g.ds, g.rc, g.is_, g.ds_ci95, g.rc_ci95, g.n, g.n_routes) == (None, None, None, None, None, 0, 0)
+
+
+def test_asks_are_counted_per_row_over_its_episodes():
+    s = summarize(with_asks(), suite="tiny", seed=7, k=2, families=FAMS, n_boot=100)
+    a, b = s.agents["A"], s.agents["B"]
+    assert s.has_asks
+    assert a.baseline.asking == AskCounts(2, 1, 0.3333, 0.6667, 0.5)  # 1 of 3 episodes asked, twice
+    assert a.families["paraphrase"].asking == AskCounts(4, 2, 0.3333, 0.6667, 0.5)  # 2 of 6 pairs
+    assert a.families["misleading"].asking == AskCounts(0, 0, None, None, None)  # no episode
+    # B never asked in a pair (its ask is on an unpaired episode): zeros, on every row of the run
+    assert b.baseline.asking == AskCounts(0, 0, 0.0, 0.0, None)
+    assert b.families["misleading"].asking == AskCounts(0, 0, 0.0, 0.0, None)
+    doc = s.to_dict()["agents"]["A"]
+    assert {k: doc["families"]["paraphrase"][k] for k in ("asks", "asks_answered", "ask_rate",
+                                                           "asks_per_episode", "answered_rate")} == {
+        "asks": 4, "asks_answered": 2, "ask_rate": 0.3333, "asks_per_episode": 0.6667, "answered_rate": 0.5}
+
+
+def test_a_run_without_asks_has_no_ask_counts():
+    s = summarize(tiny(), suite="tiny", seed=7, k=2, families=FAMS, n_boot=100)
+    assert not s.has_asks and all(b.asking is None for _, _, b in s.rows())
+    assert "ask" not in s.to_json()

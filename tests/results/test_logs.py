@@ -182,3 +182,36 @@ def test_result_malformed():
     with pytest.raises(InputError, match=r"infractions\[0\]"):
         result_from_dict({**d, "infractions": [["red_light", 0.7]]})
 
+
+
+# --------------------------------------------------------------------------- asks for clarification
+def test_asks_round_trip_and_logs_without_asks_keep_their_bytes():
+    from icrsumo.core.types import Ask
+    from icrsumo.results.logs import ask_counts
+
+    plain = make_log()
+    assert "asks" not in log_to_dict(plain) and ask_counts(plain) == (0, 0)
+    asks = (Ask(0.1, 0.0, True, 0), Ask(0.2, 1.504, False), Ask(0.3, 1.5, True, -1))
+    log = make_log(asks=asks)
+    d = log_to_dict(log)
+    assert list(d)[-1] == "asks" and d["asks"][1] == {"t": 0.2, "progress": 1.5, "answered": False,
+                                                      "instruction_id": -1}
+    back = loads_log(dumps_log(log))
+    assert back.asks == (asks[0], Ask(0.2, 1.5, False, -1), asks[2]) and ask_counts(back) == (3, 2)
+    # without asks the text is that of a log written before asks existed
+    assert dumps_log(plain) == dumps_log(make_log(asks=()))
+
+
+@pytest.mark.parametrize(("mutate", "place"), [
+    (lambda d: d.update(asks={}), "asks"),
+    (lambda d: d.update(asks=[{"t": 0.1, "progress": 0.0, "answered": True}]), "asks[0]"),
+    (lambda d: d.update(asks=[{"t": 0.1, "progress": 0.0, "answered": 1, "instruction_id": 0}]),
+     "asks[0].answered"),
+    (lambda d: d.update(asks=[{"t": "0.1", "progress": 0.0, "answered": True, "instruction_id": 0}]),
+     "asks[0].t"),
+    (lambda d: d.update(asks=[{"t": 0.1, "progress": 0.0, "answered": True, "instruction_id": 0.5}]),
+     "asks[0].instruction_id"),
+])
+def test_malformed_asks_name_the_key(mutate, place):
+    err = _bad(mutate)
+    assert err.place == place and place in str(err) and "\n" not in str(err)

@@ -58,3 +58,28 @@ def test_terminal_text_shows_control_characters_written_out():
     assert visible("tab\tline\n\u202eevil\ud800") == "tab\\tline\\n\\u202eevil\\ud800"
     assert visible("route é ✓ 日本 | ok") == "route é ✓ 日本 | ok"
     assert InputError("f\x1b[2J", "p", "bad\x07").line() == "f\\x1b[2J: p: bad\\x07"
+
+
+def test_ask_counts_are_stored_and_a_store_without_asks_keeps_its_columns(tmp_path):
+    """The ask columns appear with the first episode that asked: a store of runs without asking
+    has the columns it always had (its rows read 0 asks); one with asks keeps their counts."""
+    import sqlite3
+    from dataclasses import replace
+
+    path = tmp_path / "results.sqlite"
+
+    def columns() -> list[str]:
+        with sqlite3.connect(path) as c:
+            return [r[1] for r in c.execute("PRAGMA table_info(episodes)")]
+
+    with ResultStore(path) as store:
+        store.put(_rec("plain"))
+        before = columns()
+        assert "asks" not in before and "asks_answered" not in before
+        assert (store.records()[0].asks, store.records()[0].asks_answered) == (0, 0)
+        store.put(replace(_rec("asker"), asks=7, asks_answered=2))
+        store.put(_rec("plain", k=1))
+    assert columns() == [*before, "asks", "asks_answered"]
+    with ResultStore(path, readonly=True) as store:
+        got = {(r.agent, r.k): (r.asks, r.asks_answered) for r in store.records()}
+    assert got == {("asker", 0): (7, 2), ("plain", 0): (0, 0), ("plain", 1): (0, 0)}

@@ -8,7 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from records_example import FAMS, tiny  # tests/ is on pytest's pythonpath
+from records_example import FAMS, tiny, with_asks, with_blank  # tests/ is on pytest's pythonpath
 
 from icrsumo.core.errors import InputError
 from icrsumo.evaluation import EvalResult
@@ -76,6 +76,13 @@ def test_without_a_scoring_neither_scoring_nor_digest_is_written():
     (lambda d: d["agents"]["A"]["families"]["paraphrase"].update(dDS_ci95=[1.0]),
      "agents.A.families.paraphrase.dDS_ci95", "not [lo, hi]"),
     (lambda d: d.update(seed=None), "seed", "seed must be"),
+    (lambda d: d["agents"]["A"].update(conditioning_gain={"DS": 1.0}), "agents.A.conditioning_gain",
+     "missing key 'RC'"),
+    (lambda d: d["agents"]["B"].update(conditioning_gain=[]), "agents.B.conditioning_gain", "must be"),
+    (lambda d: d["agents"]["A"]["baseline"].update(asks=1), "agents.A.baseline",
+     "missing key 'asks_answered'"),
+    (lambda d: d["agents"]["A"]["baseline"].update(asks=-1, asks_answered=0), "agents.A.baseline.asks",
+     "out of range"),
 ])
 def test_a_malformed_summary_is_one_line_naming_the_file_and_the_key(tmp_path, edit, place, problem):
     doc = summarize(tiny(), suite="tiny", seed=7, k=2, families=FAMS, n_boot=100).to_dict()
@@ -87,6 +94,31 @@ def test_a_malformed_summary_is_one_line_naming_the_file_and_the_key(tmp_path, e
     line = err.value.line()
     assert line.startswith(f"{path}: {place}: ") and problem in line and "\n" not in line
     assert "icrsumo report" in line  # the fix
+
+
+def test_the_conditioning_gain_round_trips_after_the_families():
+    s = summarize(with_blank(), suite="g", seed=7, k=8, families=("misleading", "blank"), n_boot=100)
+    text = s.to_json()
+    back = Summary.from_json(text)
+    assert back == s and back.to_json() == text and back.agents["A"].conditioning_gain.ds == 25.0
+    assert list(json.loads(text)["agents"]["A"]) == ["baseline", "families", "conditioning_gain"]
+    doc = s.to_dict()
+    doc["agents"]["A"]["conditioning_gain"] = None  # null reads as no gain
+    assert Summary.from_dict(doc).agents["A"].conditioning_gain is None
+
+
+def test_the_ask_counts_round_trip_beside_the_answers():
+    s = summarize(with_asks(), suite="tiny", seed=7, k=2, families=FAMS, n_boot=100)
+    text = s.to_json()
+    back = Summary.from_json(text)
+    assert back == s and back.to_json() == text and back.has_asks
+    assert back.agents["A"].families["paraphrase"].asking.ask_rate == 0.3333
+    doc = json.loads(text)["agents"]["A"]
+    asks = ["asks", "asks_answered", "ask_rate", "asks_per_episode", "answered_rate"]
+    assert list(doc["baseline"])[-5:] == asks  # after the plain values (and a model's answers)
+    assert list(doc["families"]["paraphrase"])[-6:] == [*asks, "p_value"]
+    plain = summarize(tiny(), suite="tiny", seed=7, k=2, families=FAMS, n_boot=100)
+    assert Summary.from_json(plain.to_json()) == plain and not plain.has_asks  # no asks: no keys, None
 
 
 def test_the_old_mapping_view_still_reads_but_is_deprecated():

@@ -10,7 +10,9 @@ optional ``act_batch`` hook (:func:`icrsumo.agents.base.batch_hook`: a static
 torch forward pass; otherwise each session's ``act`` is called in turn. Privileged agents need
 the simulator's World view, which is not sent over the network: they are refused. Binds
 127.0.0.1 unless told otherwise. A hung agent call blocks the worker thread: clients then time
-out with "agent did not answer within N s".
+out with "agent did not answer within N s". Asking for clarification passes through both ways
+(``info.asking`` and ``obs.answer`` to the agent, its ``action.ask`` back; optional fields,
+:mod:`icrsumo.agents.remote`).
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from icrsumo.core.defaults import DEFAULT_AGENT, DEFAULT_SUITE
-from icrsumo.core.vocab import CONTROL_FAMILIES, FAMILIES
+from icrsumo.core.vocab import CONTROL_FAMILIES, DELIVERY_FAMILIES, FAMILIES
 from icrsumo.scoring import DEFAULT_SCORING, scoring_names
 
 from .options import add_llm_options, add_traffic, agent_specs, split_list, suites
@@ -32,8 +32,8 @@ def add(sub: Commands) -> None:
                    help="built-in name, module:Class, path/file.py:Class, remote:http://HOST:PORT or "
                    f"llm:MODEL@http://HOST:PORT/v1 (repeatable; default {DEFAULT_AGENT})")
     v.add_argument("--family", action="append",
-                   help=f"{', '.join(FAMILIES)}, and the controls {', '.join(CONTROL_FAMILIES)} "
-                   f"(repeatable; default the {len(FAMILIES)})")
+                   help=f"{', '.join(FAMILIES)}, the controls {', '.join(CONTROL_FAMILIES)} and the delivery "
+                   f"families {', '.join(DELIVERY_FAMILIES)} (repeatable; default the {len(FAMILIES)})")
     v.add_argument("--k", type=int, default=8, help="variants per family (default 8)")
     v.add_argument("--seed", type=int, default=2026, help="seed of the variant draws (default 2026)")
     v.add_argument("--routes", action="append", help="only these route ids (comma separated)")
@@ -73,6 +73,10 @@ def add(sub: Commands) -> None:
     v.add_argument("--guard", action="append", metavar="NAME",
                    help="also run every agent behind this instruction guard, as its own rows "
                    "AGENT+guard:NAME: text, plan, llm:MODEL@URL or a plugin's (repeatable; docs/guards.md)")
+    v.add_argument("--asking", action="store_true",
+                   help="agents may ask for clarification: the navigator answers with the route's next "
+                   "maneuver 2 simulated seconds later, at most once per maneuver, and every ask is counted; "
+                   "part of the out folder's configuration (docs/agents.md)")
     add_llm_options(v)
     v.set_defaults(func=run)
 
@@ -93,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
         inference_processes=args.inference_processes, baseline_bank=args.baseline_bank,
         retry_crashed=args.retry_crashed, scoring=args.scoring,
         replace_agents=split_list(args.replace_agent, "--replace-agent"),
-        guards=split_list(args.guard, "--guard"),
+        guards=split_list(args.guard, "--guard"), asking=args.asking,
     )
     again = (" (left out of every table, with their pairs; --retry-crashed runs them again)"
              if result.crashed else "")

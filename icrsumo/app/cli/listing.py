@@ -60,11 +60,11 @@ def _guards(args: argparse.Namespace) -> None:
 
 
 def _families(args: argparse.Namespace) -> None:
-    """The families: default, control or neither, and what each does."""
+    """The families: default, control or delivery, and what each does."""
     from icrsumo.core.vocab import FAMILY_DESCRIPTIONS
 
     for fam in ALL_FAMILIES:
-        kind = "default" if fam in FAMILIES else "control" if fam in CONTROL_FAMILIES else ""
+        kind = "default" if fam in FAMILIES else "control" if fam in CONTROL_FAMILIES else "delivery"
         print(f"{fam.value:12} {kind:8} {FAMILY_DESCRIPTIONS[fam]}")
 
 
