@@ -24,8 +24,9 @@ ENCODERS = {
     "ngram": "hashed character 3- to 5-grams plus whole words (CRC-32 into 8,192 buckets), 64-d "
              "embeddings, masked mean, 2-layer MLP",
     "minilm": "the pretrained sentence encoder all-MiniLM-L6-v2 (Apache-2.0, "
-              "`icrsumo/learn/encoders/NOTICE`), frozen: its 384-d embedding (int8 ONNX graph shipped in "
-              "the package, tokenized by `tokenizers`, computed once per distinct text) through an MLP",
+              "`icrsumo/learn/encoders/NOTICE`), frozen: its 384-d embedding (8-bit weights computed "
+              "exactly in numpy, shipped in the package, tokenized by `tokenizers`, computed once per "
+              "distinct text) through an MLP",
 }
 
 
@@ -42,7 +43,8 @@ def _table(name: str, title: str, summary: dict, eval_cmd: str) -> list[str]:
     lines = [
         f"## Measured evaluation ({title})", "",
         f"`{eval_cmd}` (seed {summary['seed']}, K = {summary['k']}, scored by "
-        f"{SCORED_BY.get(summary.get('scoring'), 'icrsumo rules before Leaderboard 1.0')}):", "",
+        f"{SCORED_BY.get(summary.get('scoring'), 'icrsumo rules before Leaderboard 1.0')}"
+        + (f"; digest `{summary['digest']}`" if summary.get("digest") else "") + "):", "",
         "| Instructions | DS | RC | IS | ΔDS [95% CI] | RD |", "|---|---|---|---|---|---|",
         _row(name, "baseline", {**res["baseline"], "dDS": 0.0, "dDS_ci95": None}),
     ]
@@ -112,7 +114,7 @@ def card(name: str, summary: dict, train_s: float | None, eval_cmd: str,
         "`torch.load(..., weights_only=True)`); the agent runs its exact checkpoint `"
         f"{name}.npz` (8-bit weights, integer activations, the same bits on every CPU, no torch: "
         "docs/exact.md), made from it with `icrsumo export-exact`; the tables below were measured "
-        "with the float checkpoint in ONNX Runtime unless they say otherwise.", "",
+        "with the exact checkpoint unless they say otherwise.", "",
         "## Data and training", "",
         "- Data: " + _data_line(meta["data"]) + "; 3 passes per route unless said otherwise, pass 0 "
         "clean and passes 1-2 with perturbations for recovery; route-oracle expert labels (its final "
