@@ -87,7 +87,10 @@ def evaluate(suite: str | Path = "tiny", agents: str | Sequence[str] | None = No
     rules, part of the folder's configuration), ``replace_agents`` (names whose stored episodes
     another agent of that name drove are deleted and run again), ``retry_crashed``, ``guards``
     (instruction guards, e.g. ``"plan"`` or ``["text", "plan"]``: every agent also runs behind each,
-    as its own rows ``AGENT+guard:NAME``; :mod:`icrsumo.guards`), ``asking`` (the navigator answers
+    as its own rows ``AGENT+guard:NAME``; :mod:`icrsumo.guards`), ``on_block`` (what an instruction
+    a guard blocks leaves the agent: ``"keep"``, what it was shown before, or ``"navigator"``, the
+    navigation plan's instruction in the route's baseline words, in rows ``AGENT+guard:NAME+navigator``;
+    part of the folder's configuration), ``asking`` (the navigator answers
     agents' asks for clarification, :mod:`icrsumo.sim.asking`; part of the folder's configuration).
 
     Returns an :class:`icrsumo.evaluation.EvalResult`: ``summary`` (OUT/summary.json),

@@ -202,8 +202,9 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
     factory = bind_agents({spec: factory}, out)[spec]  # an LLM agent: answered from OUT/llm-cache
     guard = entry.get("guard") if isinstance(entry, dict) else None
     guards = _guards(guard, out) if isinstance(guard, str) and guard else None
-    if guards is not None:  # a guarded row: its fingerprint covers the guard (evaluation.run)
-        fp = guarded_fingerprint(fp, fingerprint(guards[0]))
+    on_block = str(entry.get("on_block") or "keep") if guards is not None else "keep"
+    if guards is not None:  # a guarded row: its fingerprint covers the guard and its policy (evaluation.run)
+        fp = guarded_fingerprint(fp, fingerprint(guards[0]), on_block)
     if stored_fp and fp != stored_fp:
         raise InputError(Field("agent"), agent,
                          f"the agent {spec} is now another agent (fingerprint {short(fp)}, "
@@ -226,7 +227,8 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
         raise InputError(dest, "", f"cannot be made for the video and still ({err.strerror or err})",
                          "give a folder you can write to for them (dest)") from None
     recorder = _Recorder(dest / "episode.webm", moment_t)
-    log = run_episode(sc, iset, factory(), RunOptions(scoring=scoring, asking=cfg.get("asking") is True),
+    log = run_episode(sc, iset, factory(), RunOptions(scoring=scoring, asking=cfg.get("asking") is True,
+                                                      on_block=on_block),
                       callbacks=[recorder], guard=guards[1]() if guards is not None else None,
                       baseline=sets.get(("baseline", 0)))
     still = dest / "moment.png"

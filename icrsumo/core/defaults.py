@@ -9,3 +9,7 @@ from __future__ import annotations
 DEFAULT_AGENT = "bev-ngram-aug"
 #: the suite ``evaluate`` and ``attack`` run when none is named
 DEFAULT_SUITE = "tiny"
+#: what an instruction a guard blocks leaves the agent (``--on-block``): ``keep``, what it was
+#: shown before (the default), or ``navigator``, the navigation plan's own instruction for the
+#: stretch (:mod:`icrsumo.guards.stream`)
+BLOCK_POLICIES = ("keep", "navigator")

@@ -259,13 +259,17 @@ class ModelCall:
 class GuardDecision:
     """An instruction guard's decision on one new instruction: ``t`` (s) and route ``progress``
     (m) when it became active, its ``instruction_id``, the ``verdict`` (pass: shown to the agent;
-    block: not shown, the agent keeps the last passed one) and the guard's one-line ``reason``."""
+    block: not shown, the agent keeps what it was shown before; repair: the repaired ``text`` is
+    shown instead) and the guard's one-line ``reason``. ``baseline_id``: the id of the baseline
+    instruction whose words a repair shows (-1: the guard's own text, or "Follow the road.")."""
 
     t: float
     progress: float
     instruction_id: int
     verdict: Verdict
     reason: str = ""
+    text: str = ""
+    baseline_id: int = -1
 
 
 @dataclass(frozen=True)
@@ -382,9 +386,9 @@ class EpisodeRecord:
     ``model_calls`` / ``invalid_answers``: the agent's questions to a language model and how
     many answers were invalid (0 for agents without one). ``guard_checked`` /
     ``guard_blocked``: instructions an instruction guard checked and blocked (0 without one;
-    texts the family kept unchanged and empty texts are not counted). ``asks`` /
-    ``asks_answered``: the agent's asks for clarification and how many the navigator answered
-    (0 without asking).
+    texts the family kept unchanged and empty texts are not counted; a repaired instruction is
+    blocked too, and also counted in ``guard_repaired``). ``asks`` / ``asks_answered``: the
+    agent's asks for clarification and how many the navigator answered (0 without asking).
     """
 
     agent: str
@@ -410,3 +414,4 @@ class EpisodeRecord:
     guard_blocked: int = 0
     asks: int = 0
     asks_answered: int = 0
+    guard_repaired: int = 0

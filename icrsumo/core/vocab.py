@@ -139,10 +139,13 @@ class Intent(StrEnum):
 
 
 class Verdict(StrEnum):
-    """An instruction guard's decision on a new instruction: shown to the agent, or not."""
+    """An instruction guard's decision on a new instruction: shown to the agent, not shown,
+    or replaced by a repaired text (the guard's own, or the navigation plan's words under the
+    ``navigator`` block policy: :mod:`icrsumo.guards.stream`)."""
 
     PASS = "pass"
     BLOCK = "block"
+    REPAIR = "repair"
 
 
 class DecisionOutcome(StrEnum):

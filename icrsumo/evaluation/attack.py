@@ -81,6 +81,8 @@ class AttackOptions:
     replace_agents: tuple[str, ...] = ()
     #: instruction guards: every agent is also attacked behind each (rows ``AGENT+guard:NAME``)
     guards: tuple[str, ...] = ()
+    #: what an instruction a guard blocks leaves the agent (as evaluate's ``on_block``)
+    on_block: str = "keep"
 
     def eval_options(self) -> EvalOptions:
         """The evaluation options of the out folder (K = 1: the generated variants go unused)."""
@@ -98,6 +100,7 @@ class AttackOptions:
             agent_timeout=self.agent_timeout,
             replace_agents=self.replace_agents,
             guards=self.guards,
+            on_block=self.on_block,
         )
 
     def check(self) -> None:
@@ -189,7 +192,7 @@ def run_attack(opts: AttackOptions) -> dict:
     eopts = opts.eval_options()
     factories = resolve_agents(opts.agents)
     guards = resolve_guards(opts.guards)
-    ids = identify_agents(factories, opts.replace_agents, guards)
+    ids = identify_agents(factories, opts.replace_agents, guards, opts.on_block)
     eopts = replace(eopts, agents=ids.specs)
     out = Path(opts.out)
     with FolderLock(out):

@@ -17,7 +17,7 @@ from icrsumo.agents.registry import agent_factory
 from icrsumo.core.errors import Interrupted, describe
 from icrsumo.core.types import EpisodeLog, EpisodeRecord, EpisodeResult, InstructionSet
 from icrsumo.core.vocab import EpisodeStatus, ErrorKind, OutcomeStatus, Verdict
-from icrsumo.guards.base import split_row
+from icrsumo.guards.base import split_policy, split_row
 from icrsumo.world.scenario import Scenario
 
 from .plan import Job
@@ -102,9 +102,10 @@ class WatchedGuard:
 
 
 def row_guard(job: Job) -> str:
-    """The name of ``job``'s guard in its row (``AGENT+guard:NAME``; "" for none)."""
+    """The name of ``job``'s guard in its row (``AGENT+guard:NAME``, without a block policy's
+    ``+navigator``; "" for none)."""
     parts = split_row(job.agent) if job.guard else None
-    return parts[1] if parts else job.guard
+    return split_policy(parts[1])[0] if parts else job.guard
 
 
 class EpisodeWorker:
@@ -169,7 +170,8 @@ class EpisodeWorker:
             guard = self.guard(job)
             agent = WatchedAgent(factory(), self.watch)
             try:
-                log = run_episode(sc, iset, agent, RunOptions(scoring=job.scoring, asking=job.asking),
+                log = run_episode(sc, iset, agent, RunOptions(scoring=job.scoring, asking=job.asking,
+                                                              on_block=job.on_block),
                                   guard=guard, baseline=baseline)
             finally:
                 agent.close()  # the optional close() hook: e.g. a remote agent ends its session
@@ -201,11 +203,14 @@ class EpisodeWorker:
 
 
 def guard_counts(log: EpisodeLog, iset: InstructionSet) -> dict[str, int]:
-    """``guard_checked`` / ``guard_blocked`` of an episode: the guard's decisions on
-    instructions whose text is not empty and that the family did not keep unchanged."""
+    """``guard_checked`` / ``guard_blocked`` / ``guard_repaired`` of an episode: the guard's
+    decisions on instructions whose text is not empty and that the family did not keep
+    unchanged (a repaired instruction is blocked too: it was not shown as written)."""
     counted = {i.id for i in iset.instructions if i.text.strip() and i.template != "keep"}
     mine = [d for d in log.guard if d.instruction_id in counted]
-    return {"guard_checked": len(mine), "guard_blocked": sum(d.verdict is Verdict.BLOCK for d in mine)}
+    repaired = sum(d.verdict is Verdict.REPAIR for d in mine)
+    return {"guard_checked": len(mine), "guard_repaired": repaired,
+            "guard_blocked": sum(d.verdict is Verdict.BLOCK for d in mine) + repaired}
 
 
 def with_scores(rec: EpisodeRecord, r: EpisodeResult) -> EpisodeRecord:

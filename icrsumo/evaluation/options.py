@@ -11,6 +11,7 @@ from icrsumo.agents.registry import DEFAULT_AGENT
 from icrsumo.core.devices import check_device
 from icrsumo.core.errors import Field, InputError, check_seed
 from icrsumo.core.fsio import check_out_dir
+from icrsumo.guards.base import check_policy
 from icrsumo.instructions.baseline_bank import load_baseline_bank
 from icrsumo.instructions.families import ALL_FAMILIES, FAMILIES
 from icrsumo.scoring import SCORINGS, scoring_names
@@ -67,6 +68,11 @@ class EvalOptions:
     #: asking for clarification (``--asking``): the navigator answers agents' asks
     #: (``Action.ask``; :mod:`icrsumo.sim.asking`); part of the out folder's configuration
     asking: bool = False
+    #: what an instruction a guard blocks leaves the agent (``--on-block``): ``keep``, what it was
+    #: shown before; ``navigator``, the navigation plan's instruction in the route's baseline words,
+    #: in rows ``AGENT+guard:NAME+navigator`` (:mod:`icrsumo.guards.stream`); part of the out
+    #: folder's configuration
+    on_block: str = "keep"
 
     def check(self) -> None:
         """InputErrors for bad values (agent specs are checked when they are resolved); first
@@ -112,6 +118,11 @@ class EvalOptions:
         if self.traffic not in TRAFFIC_LEVELS:
             raise InputError(Field("traffic"), str(self.traffic), "unknown traffic level",
                              f"use {', '.join(TRAFFIC_LEVELS)}")
+        check_policy(self.on_block)
+        if self.on_block != "keep" and not self.guards:
+            raise InputError(Field("on_block"), self.on_block,
+                             "applies to guarded rows, and no guard is given",
+                             f"add {Field('guards')} NAME, or leave {Field('on_block')} out")
         if self.baseline_bank is not None:
             load_baseline_bank(self.baseline_bank)  # an InputError for a bad file, before anything runs
         suite_file(self.suite, folders=True)  # a missing file named as one, not a suite
@@ -126,7 +137,7 @@ class EvalOptions:
             if not isinstance(getattr(self, name), bool):
                 raise InputError(Field(name), repr(getattr(self, name))[:40], "must be True or False",
                                  "give a bool")
-        for name in ("suite", "backend", "traffic", "scoring"):
+        for name in ("suite", "backend", "traffic", "scoring", "on_block"):
             v = getattr(self, name)
             if not isinstance(v, str):
                 raise InputError(Field(name), repr(v)[:40], f"must be a string, not {type(v).__name__}",

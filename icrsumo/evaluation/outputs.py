@@ -92,13 +92,14 @@ def write_guards(summary: Summary, records: list[EpisodeRecord], out: Path) -> s
     """guard.json, guard.md and its figure when a row of ``summary`` is guarded
     (:func:`icrsumo.results.guards.guard_doc`); returns what the printed table adds of them
     ("" without a guarded row)."""
+    from icrsumo.guards.base import split_policy
     from icrsumo.reporting.guard import guard_note, write_guard
     from icrsumo.results.guards import guard_doc, text_holdout
 
     guards = guard_doc(summary, records)
     if guards is None:
         return ""
-    if any(r["guard"] == "text" for r in guards["rows"].values()):
+    if any(split_policy(r["guard"])[0] == "text" for r in guards["rows"].values()):
         from icrsumo.guards.text import TextGuard
         from icrsumo.instructions.banks import load_banks
 

@@ -54,6 +54,8 @@ class Job:
     guard_factory: Callable[[], object] | None = field(default=None, compare=False)
     #: the navigator answers the agent's asks (:mod:`icrsumo.sim.asking`)
     asking: bool = False
+    #: what an instruction the guard blocks leaves the agent (:data:`icrsumo.guards.base.BLOCK_POLICIES`)
+    on_block: str = "keep"
 
     @property
     def key(self) -> tuple[str, str, str, int, int]:
@@ -113,17 +115,20 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None,
     With a ``--baseline-bank`` (``bank``: the file already loaded) the file's SHA-256 is part of
     it (its name is recorded too, but another path to the same bytes is the same
     configuration). With ``asking`` on, ``"asking": true`` is part of it (a folder without the
-    key was run without asking)."""
+    key was run without asking); so is a block policy other than keep (``"on_block"``)."""
     run = dict(run or {"run": "evaluate"})
     config = {**run, "suite": opts.suite, "seed": opts.seed, "k": opts.k, "traffic": opts.traffic,
               "scoring": opts.scoring, "converter": CONVERTER_VERSION}
     if opts.asking:
         config["asking"] = True
+    if opts.on_block != "keep":
+        config["on_block"] = opts.on_block
     if opts.baseline_bank is not None and bank is None:
         bank = load_baseline_bank(opts.baseline_bank)
     compared = {k: v for k, v in config.items() if k not in run}
     compared["baseline_bank_sha256"] = bank.sha256 if bank is not None else None
     compared["asking"] = opts.asking
+    compared["on_block"] = opts.on_block
     path = out / "config.json"
     if path.is_file():
         restore = f"restore it, or use another {Field('out')} folder"
@@ -131,7 +136,8 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None,
         if not isinstance(old, dict):
             raise InputError(path, "", "is not a JSON object", restore)
         check_run(out, old, run)
-        stored = {**old, "asking": old.get("asking") is True}  # a folder without the key ran without asking
+        # a folder without the keys ran without asking, and kept what was shown before a block
+        stored = {**old, "asking": old.get("asking") is True, "on_block": old.get("on_block", "keep")}
         diff = [k for k in compared if stored.get(k) != compared[k]]
         history = old.get("k_grown_from")
         grown = [x for x in history if isinstance(x, int)] if isinstance(history, list) else []
@@ -149,6 +155,9 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None,
             if "asking" in diff:
                 fix = (f"use another {Field('out')} folder, or the same options "
                        f"({'with' if stored['asking'] else 'without'} {Field('asking')})")
+            if "on_block" in diff:
+                fix = (f"use another {Field('out')} folder, or the same options "
+                       f"({Field('on_block')} {stored['on_block']})")
             if "converter" in diff:
                 fix = ("its scenarios were converted by an earlier icrsumo, whose background traffic "
                        "differs (docs/fidelity.md, class F), so new episodes would not be comparable: "
@@ -311,7 +320,8 @@ def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mappin
     jobs = []
     for spec in opts.agents:
         for guard in ("", *opts.guards):
-            name = guarded_name(names[spec], guard_names.get(guard, guard)) if guard else names[spec]
+            name = guarded_name(names[spec], guard_names.get(guard, guard), opts.on_block) if guard \
+                else names[spec]
             for d, sc in scs:
                 instr = str(instr_dir / f"{safe_name(sc.route_id)}.json")
                 for fam, k in sets:
@@ -319,5 +329,5 @@ def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mappin
                         continue
                     jobs.append(Job(spec, name, sc.route_id, fam, k, opts.seed, str(d), instr,
                                     device=opts.agent_device, scoring=opts.scoring, guard=guard,
-                                    asking=opts.asking))
+                                    asking=opts.asking, on_block=opts.on_block if guard else "keep"))
     return jobs

@@ -21,7 +21,7 @@ from icrsumo.core.errors import Field, InputError, display_url, note, short, vis
 from icrsumo.core.fsio import FolderLock
 from icrsumo.core.types import EpisodeRecord
 from icrsumo.core.vocab import EpisodeStatus, ErrorKind, OutcomeStatus
-from icrsumo.guards.base import guarded_fingerprint, guarded_name
+from icrsumo.guards.base import guarded_fingerprint, guarded_name, split_policy
 from icrsumo.instructions.families import ALL_FAMILIES, FAMILIES
 from icrsumo.results.store import ResultStore
 from icrsumo.results.summary import Summary
@@ -145,16 +145,19 @@ class AgentIds:
     """The agents of one run: ``names`` (spec -> the name its episodes are stored under) and
     ``fingerprints`` (name -> :func:`icrsumo.agents.identity.fingerprint`; a guarded row's
     covers its agent and its guard); ``specs``: one spec per name, in the order given (two specs
-    of one agent run once); ``guard_names``: guard spec -> the name in its rows."""
+    of one agent run once); ``guard_names``: guard spec -> the name in its rows; ``on_block``:
+    the guarded rows' block policy."""
 
     names: Mapping[str, str]
     fingerprints: Mapping[str, str]
     specs: tuple[str, ...]
     guard_names: Mapping[str, str] = field(default_factory=dict)
+    on_block: str = "keep"
 
     def config(self) -> dict[str, dict[str, str]]:
         """The ``agents`` entry of OUT/config.json: name -> fingerprint and the spec that rebuilds
-        the agent (an agent file's path made absolute); a guarded row also names its ``guard``."""
+        the agent (an agent file's path made absolute); a guarded row also names its ``guard``
+        (and a block policy other than keep, ``on_block``)."""
         out = {}
         for spec in self.specs:
             name, shown = self.names[spec], spec
@@ -163,17 +166,20 @@ class AgentIds:
                 shown = f"{Path(target).resolve()}:{cls}"
             shown = display_url(shown)   # a password in a remote: or llm: URL is never stored
             out[name] = {"fingerprint": self.fingerprints[name], "spec": shown}
+            policy = {"on_block": self.on_block} if self.on_block != "keep" else {}
             for guard, gname in self.guard_names.items():
-                row = guarded_name(name, gname)
-                out[row] = {"fingerprint": self.fingerprints[row], "spec": shown, "guard": display_url(guard)}
+                row = guarded_name(name, gname, self.on_block)
+                out[row] = {"fingerprint": self.fingerprints[row], "spec": shown, "guard": display_url(guard),
+                            **policy}
         return out
 
 
 def identify_agents(factories: Mapping[str, Callable], replacing: tuple[str, ...] = (),
-                    guards: Mapping[str, Callable] | None = None) -> AgentIds:
+                    guards: Mapping[str, Callable] | None = None, on_block: str = "keep") -> AgentIds:
     """Names and fingerprints of resolved agents and of their guarded rows (``guards``: guard
-    spec -> factory); an InputError when two different agents (other fingerprints) share a name,
-    when two guards share a name, or when ``replacing`` names no agent of the run."""
+    spec -> factory, under block policy ``on_block``); an InputError when two different agents
+    (other fingerprints) share a name, when two guards share a name, or when ``replacing`` names
+    no agent of the run."""
     from icrsumo.agents.identity import fingerprint, short
     from icrsumo.guards.registry import guard_name
 
@@ -195,17 +201,21 @@ def identify_agents(factories: Mapping[str, Callable], replacing: tuple[str, ...
     for gspec, gfactory in (guards or {}).items():
         gname = gnames[gspec] = check_name(guard_name(gspec, gfactory), "guard", gspec)
         other = next((s for s, n in gnames.items() if n == gname and s != gspec), None)
+        if split_policy(gname)[1] != "keep":
+            raise InputError(Field("guards"), gspec, f"is named {gname!r}, which ends as the rows of a block "
+                             f"policy do ({Field('on_block')})", "give the guard another name (the guard "
+                             "class's name attribute)")
         if other is not None:
             raise InputError(Field("guards"), gspec, f"is named {gname!r}, as {other} is",
                              "give one of them another name (the guard class's name attribute)")
         gfp = fingerprint(gfactory)
         for name in list(dict.fromkeys(names.values())):
-            fps[guarded_name(name, gname)] = guarded_fingerprint(fps[name], gfp)
+            fps[guarded_name(name, gname, on_block)] = guarded_fingerprint(fps[name], gfp, on_block)
     for name in replacing:
         if name not in fps:
             raise InputError(Field("replace_agents"), name, "is not an agent of this run",
                              f"name one of {', '.join(sorted(fps))}")
-    return AgentIds(names, fps, tuple(first.values()), gnames)
+    return AgentIds(names, fps, tuple(first.values()), gnames, on_block)
 
 
 def check_name(name: str, kind: str, spec: str) -> str:
@@ -253,7 +263,7 @@ def run_evaluation(opts: EvalOptions) -> EvalResult:
     opts.check()
     factories = resolve_agents(opts.agents)
     guards = resolve_guards(opts.guards)
-    ids = identify_agents(factories, opts.replace_agents, guards)
+    ids = identify_agents(factories, opts.replace_agents, guards, opts.on_block)
     opts = replace(opts, agents=ids.specs)
     with FolderLock(Path(opts.out)):
         return _run_locked(opts, factories, guards, ids)

@@ -20,7 +20,7 @@ from icrsumo.core.types import Intent
 from icrsumo.core.vocab import Verdict
 from icrsumo.instructions.intent import classify_intent
 
-from .base import GuardContext, GuardInfo, PlanStep
+from .base import GuardContext, GuardInfo, PlanStep, intent_fits
 
 #: m from a junction maneuver within which an instruction may already concern the next one
 AT_JUNCTION_M = 30.0
@@ -30,9 +30,8 @@ _OTHER_LANE = {Intent.LANE_LEFT: Intent.LANE_RIGHT, Intent.LANE_RIGHT: Intent.LA
 
 
 def _fits(intent: Intent, step: PlanStep) -> bool:
-    """Whether a turn / straight intent is what the plan does at ``step`` (straight on also
-    fits a maneuver that keeps to the road, e.g. a highway entry)."""
-    return intent == step.intent or (intent is Intent.STRAIGHT and step.intent is Intent.FOLLOW)
+    """Whether a turn / straight intent is what the plan does at ``step`` (:func:`intent_fits`)."""
+    return intent_fits(intent, step.intent)
 
 
 class PlanGuard:

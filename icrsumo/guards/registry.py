@@ -33,6 +33,8 @@ GUARDS.register("text", "icrsumo.guards.text:TextGuard",
                 description="from the text alone: authority framing, retractions, unplaceable intents")
 GUARDS.register("plan", "icrsumo.guards.plan:PlanGuard",
                 description="checks the instruction's intent against the navigation plan")
+GUARDS.register("text-learned", "icrsumo.learn.text_guard:LearnedTextGuard",
+                description="from the text alone: a linear classifier over hashed character n-grams")
 register_plugins(GUARDS, GUARD_ENTRY_POINTS)
 
 

@@ -22,12 +22,23 @@ def _num(x: float | None, sign: bool = False) -> str:
     return "—" if x is None else (f"{x:+.1f}" if sign else f"{x:.1f}")
 
 
+def _repair_cells(f: dict) -> str:
+    """A family's repair columns: instructions repaired, and the repaired episodes' DS guarded /
+    unguarded over their pairs."""
+    x = f["repairs"]
+    return (f" {x['repaired']} in {x['episodes']} episodes | {_num(x['DS'])} / {_num(x['DS_unguarded'])} "
+            f"({x['pairs']}) |")
+
+
 def _row_table(row: str, r: dict, escape) -> list[str]:
-    """The table of one guarded row: per family its blocks, scores, shrink, flips and loss."""
+    """The table of one guarded row: per family its blocks, scores, shrink, flips and loss (and,
+    for a row with repairs, what they were and bought)."""
+    repairs = "on_block" in r
     lines = ["", f"## {escape(row)}", "",
              "| Family | blocked | DS guarded / unguarded | ΔDS guarded / unguarded | shrink | "
-             "flips prevented / caused | loss vs unguarded (p) |",
-             "|---|---:|---:|---:|---:|---:|---:|"]
+             "flips prevented / caused | loss vs unguarded (p) |"
+             + (" repaired | repaired episodes: DS guarded / unguarded (pairs) |" if repairs else ""),
+             "|---|---:|---:|---:|---:|---:|---:|" + ("---:|---:|" if repairs else "")]
     for fam, f in r["families"].items():
         loss = f["loss"]
         p = "—" if loss["p_value"] is None else f"{loss['p_value']:.3g}"
@@ -37,18 +48,22 @@ def _row_table(row: str, r: dict, escape) -> list[str]:
             f"{_num(f['guarded']['DS'])} / {_num(f['unguarded']['DS'])} | "
             f"{_num(f['guarded']['dDS'], True)} / {_num(f['unguarded']['dDS'], True)} | "
             f"{_pct(f['dDS_shrink'])} | {f['flips']['prevented']} / {f['flips']['caused']} | "
-            f"{_num(loss['mean_dDS_vs_unguarded'], True)} ({p}) |")
+            f"{_num(loss['mean_dDS_vs_unguarded'], True)} ({p}) |" + (_repair_cells(f) if repairs else ""))
     return lines
 
 
 def guard_markdown(doc: dict, escape=lambda s: s) -> str:
     """guard.md: one line per guard (detection, false blocks), one table per guarded row.
     ``escape`` makes a name safe in a Markdown table cell."""
+    repairs = any("on_block" in r for r in doc["rows"].values())
     lines = ["# Instruction guards", "",
              "Block rate on misleading = detection; on baseline, paraphrase and noise = false blocks "
              "(ambiguity apart). ΔDS against each row's own baseline; shrink = 1 - ΔDS guarded / ΔDS "
              "unguarded; flips against the unguarded agent; loss: DS guarded - unguarded, Wilcoxon "
-             "signed-rank over routes, Holm over the row's families.", "",
+             "signed-rank over routes, Holm over the row's families."
+             + (" A repaired instruction is blocked too; its row says how many were repaired and the "
+                "repaired episodes' DS against the unguarded agent's on the same pairs." if repairs else ""),
+             "",
              "| Guard | detection | false blocks | false blocks (ambiguity) | targets |",
              "|---|---:|---:|---:|---|"]
     for name, g in doc["guards"].items():
@@ -108,9 +123,11 @@ def guard_note(doc: dict) -> str:
         for fams in (PRESERVING, (Family.MISLEADING,)):
             f = [r["families"][str(x)] for r in rows.values() for x in fams if str(x) in r["families"]]
             counts[fams] = (sum(x["blocked"] for x in f), sum(x["checked"] for x in f))
+        repaired = doc["guards"][guard].get("repaired")
+        fixed = "" if repaired is None else f"; repaired {sum(repaired.values())} blocked instructions"
         lines.append(f"Guard {visible(guard)}: blocked {_share(*counts[(Family.MISLEADING,)])} misleading "
                      f"instructions (detection) and {_share(*counts[PRESERVING])} baseline, paraphrase and "
-                     "noise ones (false blocks)")
+                     f"noise ones (false blocks){fixed}")
         for name, r in rows.items():
             if not r["unguarded_in_run"]:
                 continue

@@ -17,10 +17,20 @@ per family (baseline included):
   over the row's families (as the tables' p-values), and ``significant_loss`` (p < 0.05 and a
   negative mean).
 
+A repaired instruction (the guard's own repair, or the ``navigator`` block policy's: rows
+``AGENT+guard:NAME+navigator``) is blocked too: it was not shown as written. A row run under the
+navigator policy, or with any repair, also has ``on_block`` and, per family, ``repairs``: how
+many instructions were ``repaired`` and what that bought, from this folder alone: over the
+finished ``episodes`` with a repair and the ``pairs`` of them whose unguarded episode is stored
+too, the mean ``DS`` / ``RC`` guarded and ``DS_unguarded`` / ``RC_unguarded`` (None without
+pairs). What repair bought over blocking is the navigator row's DS against the same guard's
+under keep, which another out folder holds (the policy is part of a folder's configuration).
+
 ``guards`` pools each guard's block rates over its rows: ``detection`` (misleading) and
-``false_blocks`` (baseline + paraphrase + noise), ``false_blocks_ambiguity`` apart. A guard's
-targets (:data:`TARGETS`) are checked where it has them. guard.json, guard.md and its figure
-are written by :mod:`icrsumo.reporting.guard`.
+``false_blocks`` (baseline + paraphrase + noise), ``false_blocks_ambiguity`` apart, and, where it
+repaired, ``repaired``: the instructions repaired per family. A guard under the navigator policy
+is its own entry (``plan+navigator``). A guard's targets (:data:`TARGETS`) are checked where it
+has them. guard.json, guard.md and its figure are written by :mod:`icrsumo.reporting.guard`.
 """
 
 from __future__ import annotations
@@ -32,7 +42,7 @@ import numpy as np
 
 from icrsumo.core.types import EpisodeRecord
 from icrsumo.core.vocab import EpisodeStatus, Family
-from icrsumo.guards.base import split_row
+from icrsumo.guards.base import split_policy, split_row
 
 from .aggregate import holm, paired_test
 from .summary import Block, FamilyStats, Summary
@@ -41,7 +51,8 @@ GUARD_FORMAT = "icrsumo-guard/1"
 #: goal-preserving families whose blocks are false blocks (ambiguity is reported apart)
 PRESERVING = (Family.BASELINE, Family.PARAPHRASE, Family.NOISE)
 #: the issue's targets: guard -> (detection at least, false blocks at most, misleading ΔDS shrink at least)
-TARGETS = {"plan": {"detection": 0.95, "false_blocks": 0.01, "dDS_shrink": 0.80}}
+TARGETS = {"plan": {"detection": 0.95, "false_blocks": 0.01, "dDS_shrink": 0.80},
+           "plan+navigator": {"detection": 0.95, "false_blocks": 0.01, "dDS_shrink": 0.90}}
 
 
 def _rate(blocked: int, checked: int) -> float | None:
@@ -69,7 +80,24 @@ def _pairs(records: Sequence[EpisodeRecord], agent: str, family: str) -> dict[tu
             if r.agent == agent and r.family == family and r.status == EpisodeStatus.DONE}
 
 
-def _row(summary: Summary, records: Sequence[EpisodeRecord], row: str, base: str) -> dict[str, Any]:
+def _mean(values: Sequence[float]) -> float | None:
+    return round(float(np.mean(values)), 4) if len(values) else None
+
+
+def _repairs(g: dict[tuple, EpisodeRecord], u: dict[tuple, EpisodeRecord]) -> dict[str, Any]:
+    """What a family's repairs bought (module doc): ``g`` / ``u`` the guarded and unguarded
+    finished episodes by (route, k, seed)."""
+    mine = [k for k, r in g.items() if r.guard_repaired]
+    both = [k for k in mine if k in u]
+    return {"repaired": sum(g[k].guard_repaired for k in mine), "episodes": len(mine), "pairs": len(both),
+            "DS": _mean([g[k].ds for k in both]), "DS_unguarded": _mean([u[k].ds for k in both]),
+            "RC": _mean([g[k].rc for k in both]), "RC_unguarded": _mean([u[k].rc for k in both])}
+
+
+def _row(summary: Summary, records: Sequence[EpisodeRecord], row: str, base: str,
+         repairs: bool = False) -> dict[str, Any]:
+    """Per family of guarded row ``row`` against ``base`` (module doc); ``repairs``: with what
+    repairs bought."""
     fams = [str(Family.BASELINE), *summary.families]
     out: dict[str, Any] = {}
     raw_p: list[float | None] = []
@@ -94,7 +122,8 @@ def _row(summary: Summary, records: Sequence[EpisodeRecord], row: str, base: str
         out[fam] = {"checked": checked, "blocked": blocked, "block_rate": _rate(blocked, checked),
                     "guarded": gs, "unguarded": us, "dDS_shrink": shrink, "pairs": len(both),
                     "flips": {"prevented": prevented, "caused": caused},
-                    "loss": {"mean_dDS_vs_unguarded": diff, "p_value_raw": p}}
+                    "loss": {"mean_dDS_vs_unguarded": diff, "p_value_raw": p},
+                    **({"repairs": _repairs(g, u)} if repairs else {})}
     for fam, p in zip(fams, holm(raw_p)):
         loss = out[fam]["loss"]
         loss["p_value"] = None if p is None else round(p, 6)
@@ -113,14 +142,17 @@ def guard_doc(summary: Summary, records: Sequence[EpisodeRecord]) -> dict[str, A
         if parts is None:
             continue
         agent, guard = parts
-        fams = _row(summary, records, name, agent)
+        policy = split_policy(guard)[1]
+        repairs = policy != "keep" or any(r.guard_repaired for r in records if r.agent == name)
+        fams = _row(summary, records, name, agent, repairs)
         rows[name] = {"agent": agent, "guard": guard, "unguarded_in_run": agent in summary.agents,
-                      "families": fams}
+                      **({"on_block": policy} if repairs else {}), "families": fams}
         acc = pooled.setdefault(guard, {})
         for fam, f in fams.items():
-            c = acc.setdefault(fam, [0, 0])
+            c = acc.setdefault(fam, [0, 0, 0])
             c[0] += f["checked"]
             c[1] += f["blocked"]
+            c[2] += f["repairs"]["repaired"] if repairs else 0
     if not rows:
         return None
     guards = {}
@@ -132,6 +164,8 @@ def guard_doc(summary: Summary, records: Sequence[EpisodeRecord]) -> dict[str, A
             "detection": rate([Family.MISLEADING]), "false_blocks": rate(PRESERVING),
             "false_blocks_ambiguity": rate([Family.AMBIGUITY]),
             "block_rate": {fam: _rate(c[1], c[0]) for fam, c in acc.items()}}
+        if any(r.get("on_block") for r in rows.values() if r["guard"] == guard):
+            entry["repaired"] = {fam: c[2] for fam, c in acc.items()}
         target = TARGETS.get(guard)
         if target is not None:
             shrinks = [r["families"].get(Family.MISLEADING, {}).get("dDS_shrink") for r in rows.values()

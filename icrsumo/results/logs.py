@@ -14,8 +14,10 @@ already-rounded logs round-trip exactly. Version 2 holds what the leaderboard's 
 rescore the episode (:mod:`icrsumo.scoring`): the route polyline,
 the OutsideRouteLanesTest bits per step and a contact event per step of contact; version 1 logs
 cannot be rescored and are refused. Optional keys after ``events``, present only when they have
-entries: ``model_calls``, ``guard`` and ``asks`` (the agent's asks for clarification, one object
-``{"t", "progress", "answered", "instruction_id"}`` each: :class:`~icrsumo.core.types.Ask`).
+entries: ``model_calls``, ``guard`` (one object ``{"t", "progress", "instruction_id", "verdict",
+"reason"}`` per decision; a repair's adds ``"text"`` and ``"baseline_id"``:
+:class:`~icrsumo.core.types.GuardDecision`) and ``asks`` (the agent's asks for clarification, one
+object ``{"t", "progress", "answered", "instruction_id"}`` each: :class:`~icrsumo.core.types.Ask`).
 Malformed input raises :class:`~icrsumo.core.errors.InputError`
 naming the key.
 """
@@ -75,6 +77,9 @@ ASK_FIELDS = ("t", "progress", "answered", "instruction_id")
 
 #: the fields of one entry of ``guard`` (an object each), in stored order
 GUARD_FIELDS = ("t", "progress", "instruction_id", "verdict", "reason")
+#: the fields of a repair's entry of ``guard``: the text shown instead and the id of the baseline
+#: instruction whose words it is (-1: the guard's own text, or "Follow the road.")
+REPAIR_FIELDS = (*GUARD_FIELDS, "text", "baseline_id")
 
 #: the fields of one entry of ``model_calls`` (an object each), in stored order
 CALL_FIELDS = ("t", "instruction_id", "at", "key", "prompt", "answer", "maneuver", "valid", "problem")
@@ -166,8 +171,9 @@ def _call_to_dict(c: ModelCall, i: int) -> dict[str, Any]:
 
 
 def _guard_to_dict(g: GuardDecision, i: int) -> dict[str, Any]:
+    repair = {"text": g.text, "baseline_id": int(g.baseline_id)} if g.verdict == Verdict.REPAIR else {}
     return {"t": _r(g.t, 3, f"guard[{i}].t"), "progress": _r(g.progress, 2, f"guard[{i}].progress"),
-            "instruction_id": int(g.instruction_id), "verdict": str(g.verdict), "reason": g.reason}
+            "instruction_id": int(g.instruction_id), "verdict": str(g.verdict), "reason": g.reason, **repair}
 
 
 def _guard_from(rd: _LogChecker, raw: Any) -> tuple[GuardDecision, ...]:
@@ -175,16 +181,21 @@ def _guard_from(rd: _LogChecker, raw: Any) -> tuple[GuardDecision, ...]:
     out = []
     for i, g in enumerate(raw):
         at = f"guard[{i}]"
-        if not isinstance(g, dict) or set(g) != set(GUARD_FIELDS):
-            raise rd.fail(at, f"expected an object with keys {', '.join(GUARD_FIELDS)}")
+        repair = isinstance(g, dict) and g.get("verdict") == Verdict.REPAIR
+        keys = REPAIR_FIELDS if repair else GUARD_FIELDS
+        if not isinstance(g, dict) or set(g) != set(keys):
+            raise rd.fail(at, f"expected an object with keys {', '.join(keys)}")
         try:
             verdict = Verdict(g["verdict"])
         except ValueError:
-            raise rd.fail(f"{at}.verdict", f"expected pass or block, got {short(g['verdict'])}") from None
+            raise rd.fail(f"{at}.verdict",
+                          f"expected pass, block or repair, got {short(g['verdict'])}") from None
         out.append(GuardDecision(
             t=rd.number(g["t"], f"{at}.t"), progress=rd.number(g["progress"], f"{at}.progress"),
             instruction_id=rd.integer(g["instruction_id"], f"{at}.instruction_id"), verdict=verdict,
-            reason=rd.string(g["reason"], f"{at}.reason")))
+            reason=rd.string(g["reason"], f"{at}.reason"),
+            **({"text": rd.string(g["text"], f"{at}.text"),
+                "baseline_id": rd.integer(g["baseline_id"], f"{at}.baseline_id")} if repair else {})))
     return tuple(out)
 
 

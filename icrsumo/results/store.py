@@ -37,9 +37,11 @@ CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 
 #: integer columns that count things (0 when a store written before them has NULL)
 _COUNTS = ("model_calls", "invalid_answers", "guard_checked", "guard_blocked")
-#: counts a store has only once an episode with one of them was stored (asks for clarification:
-#: a store of runs without asking keeps the columns it always had); 0 where absent
-_LATE_COUNTS = ("asks", "asks_answered")
+#: counts a store has only once an episode with one of their group was stored (asks for
+#: clarification, repairs of a guard: a store of runs without them keeps the columns it always
+#: had); 0 where absent
+_LATE_GROUPS = (("asks", "asks_answered"), ("guard_repaired",))
+_LATE_COUNTS = tuple(c for group in _LATE_GROUPS for c in group)
 
 #: bytes free under which an SQLite I/O error is taken as the disk being full
 _FULL_BELOW = 1 << 20
@@ -265,11 +267,11 @@ class ResultStore:
         self._claimed = dict(fingerprints)
         return unmarked
 
-    def _add_columns(self, late: bool = False) -> None:
-        """The columns a store written by an earlier icrsumo lacks; ``late``: the
+    def _add_columns(self, late: tuple[str, ...] = ()) -> None:
+        """The columns a store written by an earlier icrsumo lacks; ``late``: those of the
         :data:`_LATE_COUNTS` too."""
         for col, decl in (("outside_m", "REAL DEFAULT 0"), ("fingerprint", "TEXT DEFAULT ''"),
-                          *((c, "INTEGER DEFAULT 0") for c in (*_COUNTS, *(_LATE_COUNTS if late else ())))):
+                          *((c, "INTEGER DEFAULT 0") for c in (*_COUNTS, *late))):
             if col not in self._cols:
                 self._db.execute(f"ALTER TABLE episodes ADD COLUMN {col} {decl}")
                 self._cols.add(col)
@@ -282,7 +284,8 @@ class ResultStore:
         row["log"] = zlib.compress(log_json.encode("utf-8"), 6) if log_json else None
         row["fingerprint"] = self._claimed.get(rec.agent, "")
         with self._guard("writing"):
-            self._add_columns(late=any(row[c] for c in _LATE_COUNTS))
+            self._add_columns(late=tuple(c for group in _LATE_GROUPS if any(row[x] for x in group)
+                                         for c in group))
             cols = [c for c in _COLUMNS if c not in _LATE_COUNTS or c in self._cols] + ["log", "fingerprint"]
             self._db.execute(
                 f"INSERT OR REPLACE INTO episodes ({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})",

@@ -25,48 +25,27 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from icrsumo.core.types import Ask, Instruction, Maneuver
-from icrsumo.guards.base import FALLBACK_TEXT, maneuver_over
+from icrsumo.guards.base import FALLBACK_TEXT, BaselineWords
 
 #: simulated seconds between an ask and its answer (the agent keeps driving meanwhile)
 ASK_DELAY = 2.0
 
 
-class Navigator:
+class Navigator(BaselineWords):
     """Answers asks about a route's ``maneuvers`` (sorted by position) with the ``baseline``
-    instructions' words for them, ``delay`` s after each ask (module docstring for the rules)."""
+    instructions' words for them (:class:`~icrsumo.guards.base.BaselineWords`: the maneuver
+    ahead, worded as the baseline shows it there), ``delay`` s after each ask (module docstring
+    for the rules)."""
 
     def __init__(self, maneuvers: Sequence[Maneuver], baseline: Sequence[Instruction],
                  delay: float = ASK_DELAY) -> None:
-        self.maneuvers, self.delay = tuple(maneuvers), float(delay)
-        #: maneuver index -> the baseline instructions for it, by trigger
-        self.words: dict[int, list[Instruction]] = {}
-        for i, m in enumerate(self.maneuvers):
-            pos = round(m.pos, 2)
-            mine = [ins for ins in baseline
-                    if ins.maneuver_pos is not None and round(ins.maneuver_pos, 2) == pos]
-            if mine:
-                self.words[i] = sorted(mine, key=lambda ins: ins.trigger)
+        super().__init__(maneuvers, baseline)
+        self.delay = float(delay)
         #: every ask so far
         self.asks: list[Ask] = []
         self._answered: set[int] = set()
         self._pending: list[tuple[float, str, int]] = []   # (due s, text, id), in arrival order
         self._shown: tuple[str, int, int] | None = None    # (text, id, triggered index at arrival)
-
-    def ahead(self, progress: float) -> int:
-        """The index of the maneuver ahead at route ``progress`` (m): the first lane change whose
-        start is not behind, or junction maneuver whose junction the ego has not left;
-        ``len(maneuvers)`` when none is left."""
-        def ahead(m: Maneuver) -> bool:
-            return m.pos >= progress if m.kind.startswith("lane_change") else maneuver_over(m) > progress
-
-        return next((i for i, m in enumerate(self.maneuvers) if ahead(m)), len(self.maneuvers))
-
-    def wording(self, j: int, progress: float) -> Instruction | None:
-        """The baseline instruction that answers for maneuver ``j`` at route ``progress`` (m): the
-        last of its instructions triggered there, else the first (None: none, or no maneuver)."""
-        mine = self.words.get(j, [])
-        shown = [ins for ins in mine if ins.trigger <= progress + 1e-9]
-        return shown[-1] if shown else (mine[0] if mine else None)
 
     def ask(self, t: float, progress: float) -> Ask:
         """Count an ask at time ``t`` (s) and route ``progress`` (m); the answer, if the maneuver

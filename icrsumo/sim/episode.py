@@ -60,13 +60,17 @@ class RunOptions:
     BEV spec of the agent's raster (it changes what the agent sees, never the scoring), the
     scoring whose route criteria end the episode (:data:`icrsumo.scoring.SCORINGS`) and
     ``asking``: whether the navigator answers the agent's asks (``Action.ask``), ``ask_delay``
-    simulated seconds later (:mod:`icrsumo.sim.asking`; off: asks are ignored)."""
+    simulated seconds later (:mod:`icrsumo.sim.asking`; off: asks are ignored); ``on_block``:
+    what an instruction a guard blocks leaves the agent (:data:`icrsumo.guards.base.BLOCK_POLICIES`:
+    ``keep``, what it was shown before; ``navigator``, the plan's instruction in the baseline's
+    words; :mod:`icrsumo.guards.stream`)."""
 
     control_every: int = CONTROL_EVERY
     bev: BevSpec = BevSpec()
     scoring: str = "lb1"
     asking: bool = False
     ask_delay: float = ASK_DELAY
+    on_block: str = "keep"
 
 
 @cache
@@ -95,7 +99,8 @@ class Episode:
     ``privileged``: observations carry the :class:`World` view (built-in agents only);
     ``needs_route``: that view includes the route (the route-oracle only). With
     ``options.asking``, ``baseline`` (the route's baseline sequence; ``instructions`` itself when
-    it is the baseline) words the navigator's answers.
+    it is the baseline) words the navigator's answers, and with a ``guard`` under
+    ``options.on_block`` navigator, the repairs of blocked instructions.
     """
 
     def __init__(self, scenario: Scenario, instructions: InstructionSet,
@@ -124,7 +129,11 @@ class Episode:
         self.texts = [i.rendered() for i in self.instr]
         self.notices = instructions.notices
         #: the instruction guard between the stream and the agent (None: every one is shown)
-        self.guarded = None if guard is None else GuardedStream(guard, scenario, net, self.instr, self.texts)
+        self.guarded = None if guard is None else GuardedStream(
+            guard, scenario, net, self.instr, self.texts, options.on_block,
+            _route_baseline(scenario, instructions, baseline, "the navigator block policy needs the route's "
+                            "baseline instructions, whose words replace blocked ones").instructions
+            if options.on_block == "navigator" else None)
         #: the navigator that answers the agent's asks (None: asking is off)
         self.navigator = _navigator(scenario, net, instructions, baseline, options.ask_delay) \
             if options.asking else None
@@ -293,16 +302,17 @@ class Episode:
             return True
         return False
 
-    def _text(self, k: int) -> str:
-        """The text the agent reads while instruction ``k`` is shown (-1: none, or the guard's
-        stand-in when it blocked the first one)."""
+    def _shown(self) -> tuple[str, int]:
+        """(text, instruction id) the agent reads now: the instruction shown (-1: none), or
+        what the guard shows instead (:meth:`GuardedStream.observed`)."""
         if self.guarded is not None:
-            return self.guarded.text(k)
-        return self.texts[k] if k >= 0 else ""
+            return self.guarded.observed()
+        k = self.k_shown
+        return (self.texts[k], self.instr[k].id) if k >= 0 else ("", -1)
 
     def _observation(self) -> Observation:
         """The agent's observation at the current step (BEV, speed, instruction, notice)."""
-        state, params, progress, k_instr = self.state, self.params, self.progress, self.k_shown
+        state, params, progress = self.state, self.params, self.progress
         frame = self.frame
         notice = ""
         for n in self.notices:
@@ -321,7 +331,7 @@ class Episode:
                           vehicles=frame.vehicles, pedestrians=frame.pedestrians,
                           tl_states=frame.tl_states, route=self.ego_route if self.needs_route else None,
                           progress=progress)
-        text, iid = self._text(k_instr), self.instr[k_instr].id if k_instr >= 0 else -1
+        text, iid = self._shown()
         answer = self.navigator.shown(frame.t, self.k_instr) if self.navigator is not None else None
         if answer is not None:
             text, iid = answer
@@ -350,15 +360,23 @@ class Episode:
         )
 
 
-def _navigator(scenario: Scenario, net: RoadNet, instructions: InstructionSet,
-               baseline: InstructionSet | None, delay: float) -> Navigator:
-    """The navigator of an episode with asking on; an InputError without the route's baseline."""
+def _route_baseline(scenario: Scenario, instructions: InstructionSet, baseline: InstructionSet | None,
+                    why: str) -> InstructionSet:
+    """The route's baseline sequence (``instructions`` itself when it is the baseline); an
+    InputError saying ``why`` it is needed without it."""
     if baseline is None and instructions.family == Family.BASELINE:
         baseline = instructions
     if baseline is None or baseline.family != Family.BASELINE or baseline.route_id != scenario.route_id:
-        raise InputError(Field("baseline"), scenario.route_id,
-                         "asking needs the route's baseline instructions, whose words answer the agent",
+        raise InputError(Field("baseline"), scenario.route_id, why,
                          "pass the baseline sequence of this route")
+    return baseline
+
+
+def _navigator(scenario: Scenario, net: RoadNet, instructions: InstructionSet,
+               baseline: InstructionSet | None, delay: float) -> Navigator:
+    """The navigator of an episode with asking on; an InputError without the route's baseline."""
+    baseline = _route_baseline(scenario, instructions, baseline,
+                               "asking needs the route's baseline instructions, whose words answer the agent")
     return Navigator(extract_maneuvers(scenario, net), baseline.instructions, delay)
 
 
@@ -374,7 +392,8 @@ def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
     when it also declares ``needs_route = True``. An agent with an ``episode_calls()`` method
     (one that asks a language model) has what it returns stored as the log's ``model_calls``.
     With a ``guard`` (:mod:`icrsumo.guards`) each new instruction passes it before the agent
-    sees it; its decisions are the log's ``guard`` and the log is named ``AGENT+guard:NAME``.
+    sees it; its decisions are the log's ``guard`` and the log is named ``AGENT+guard:NAME``
+    (``AGENT+guard:NAME+navigator`` under ``options.on_block`` navigator).
     With ``options.asking`` the navigator answers the agent's asks in the words of ``baseline``
     (the route's baseline sequence); they are the log's ``asks``."""
     with Episode(scenario, instructions, options, privileged=bool(getattr(agent, "privileged", False)),
@@ -391,6 +410,6 @@ def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
                 cb.on_act_end(ep, action)
             obs = ep.step(action)
     name = getattr(agent, "name", type(agent).__name__)
-    log = ep.log(name if ep.guarded is None else guarded_name(name, ep.guarded.name))
+    log = ep.log(name if ep.guarded is None else guarded_name(name, ep.guarded.name, ep.guarded.on_block))
     calls = getattr(agent, "episode_calls", None)  # an agent that asks a language model
     return replace(log, model_calls=tuple(calls())) if callable(calls) else log

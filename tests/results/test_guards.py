@@ -67,3 +67,43 @@ def test_the_text_guard_is_reported_on_the_templates_it_was_not_written_from():
     assert doc["tuning"]["detection"] == 1.0           # its cues were written from these
     assert 0.5 <= doc["held_out"]["detection"] <= 1.0  # the finding (0.75 when written)
     assert doc["paraphrase_bank"]["block_rate"] == 0.0
+
+
+def test_repairs_are_counted_with_what_they_bought_and_keep_rows_are_as_before():
+    """A navigator row (``a+guard:plan+navigator``): its repaired instructions are blocked too,
+    counted per family, with the repaired episodes' DS / RC beside the unguarded agent's on the
+    same pairs; the plan guard under repair has its own entry and targets. A keep row without
+    repairs has the document it always had."""
+    from dataclasses import replace
+
+    recs = [r for r in records() if r.agent == "a"]
+    for r in records():
+        if r.agent == "a+guard:plan":
+            repaired = r.guard_blocked if (r.route_id, r.k) != ("r2", 1) else 0   # one episode passed all
+            recs.append(replace(r, agent="a+guard:plan+navigator", guard_repaired=repaired))
+    summary = summarize(recs, suite="t", seed=1, k=2, families=("paraphrase", "misleading"))
+    doc = guard_doc(summary, recs)
+    row = doc["rows"]["a+guard:plan+navigator"]
+    assert (row["agent"], row["guard"], row["on_block"]) == ("a", "plan+navigator", "navigator")
+    mis = row["families"]["misleading"]
+    assert (mis["checked"], mis["blocked"]) == (16, 16)
+    assert mis["repairs"] == {"repaired": 14, "episodes": 7, "pairs": 7, "DS": 100.0, "DS_unguarded": 40.0,
+                              "RC": 100.0, "RC_unguarded": 40.0}
+    assert row["families"]["baseline"]["repairs"] == {"repaired": 0, "episodes": 0, "pairs": 0, "DS": None,
+                                                      "DS_unguarded": None, "RC": None, "RC_unguarded": None}
+    g = doc["guards"]["plan+navigator"]
+    assert g["repaired"] == {"baseline": 0, "paraphrase": 1, "misleading": 14}
+    assert g["targets"]["dDS_shrink"]["target"] == 0.9 and g["targets"]["dDS_shrink"]["met"]
+    md = guard_markdown(doc)
+    assert "| repaired | repaired episodes: DS guarded / unguarded (pairs) |" in md
+    assert "| 14 in 7 episodes | 100.0 / 40.0 (7) |" in md
+    from icrsumo.reporting.guard import guard_note
+
+    assert "Guard plan+navigator: blocked 16/16 (100.0 %) misleading instructions (detection) and 1/24 " \
+           "(4.2 %) baseline, paraphrase and noise ones (false blocks); repaired 15 blocked instructions" \
+           in guard_note(doc)
+    keep = guard_doc(summarize(records(), suite="t", seed=1, k=2, families=("paraphrase", "misleading")),
+                     records())
+    assert "on_block" not in keep["rows"]["a+guard:plan"] and "repaired" not in keep["guards"]["plan"]
+    assert all("repairs" not in f for f in keep["rows"]["a+guard:plan"]["families"].values())
+    assert "repaired" not in guard_markdown(keep)

@@ -215,3 +215,33 @@ def test_asks_round_trip_and_logs_without_asks_keep_their_bytes():
 def test_malformed_asks_name_the_key(mutate, place):
     err = _bad(mutate)
     assert err.place == place and place in str(err) and "\n" not in str(err)
+
+
+# --------------------------------------------------------------------------- a guard's repairs
+def test_repair_entries_carry_their_text_and_pass_or_block_entries_keep_their_bytes():
+    from icrsumo.core.types import GuardDecision
+    from icrsumo.core.vocab import Verdict
+
+    block = GuardDecision(0.1, 0.0, 0, Verdict.BLOCK, "right, but the plan goes left in 24 m")
+    repair = GuardDecision(0.2, 1.5, 2, Verdict.REPAIR, "why", "At the T-junction, turn left.", 0)
+    d = log_to_dict(make_log(guard=(block, repair)))
+    assert d["guard"][0] == {"t": 0.1, "progress": 0.0, "instruction_id": 0, "verdict": "block",
+                             "reason": "right, but the plan goes left in 24 m"}
+    assert d["guard"][1] == {"t": 0.2, "progress": 1.5, "instruction_id": 2, "verdict": "repair",
+                             "reason": "why", "text": "At the T-junction, turn left.", "baseline_id": 0}
+    assert loads_log(dumps_log(make_log(guard=(block, repair)))).guard == (block, repair)
+
+
+@pytest.mark.parametrize(("entry", "place"), [
+    ({"t": 0.1, "progress": 0.0, "instruction_id": 0, "verdict": "repair", "reason": ""}, "guard[0]"),
+    ({"t": 0.1, "progress": 0.0, "instruction_id": 0, "verdict": "block", "reason": "", "text": "x",
+      "baseline_id": -1}, "guard[0]"),
+    ({"t": 0.1, "progress": 0.0, "instruction_id": 0, "verdict": "repair", "reason": "", "text": 3,
+      "baseline_id": -1}, "guard[0].text"),
+    ({"t": 0.1, "progress": 0.0, "instruction_id": 0, "verdict": "repair", "reason": "", "text": "x",
+      "baseline_id": 0.5}, "guard[0].baseline_id"),
+    ({"t": 0.1, "progress": 0.0, "instruction_id": 0, "verdict": "maybe", "reason": ""}, "guard[0].verdict"),
+])
+def test_malformed_guard_entries_name_the_key(entry, place):
+    err = _bad(lambda d: d.update(guard=[entry]))
+    assert err.place == place and "\n" not in str(err)

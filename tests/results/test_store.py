@@ -83,3 +83,26 @@ def test_ask_counts_are_stored_and_a_store_without_asks_keeps_its_columns(tmp_pa
     with ResultStore(path, readonly=True) as store:
         got = {(r.agent, r.k): (r.asks, r.asks_answered) for r in store.records()}
     assert got == {("asker", 0): (7, 2), ("plain", 0): (0, 0), ("plain", 1): (0, 0)}
+
+
+def test_repair_counts_are_stored_and_a_store_without_repairs_keeps_its_columns(tmp_path):
+    """``guard_repaired`` appears with the first episode a guard repaired (and not with asks)."""
+    import sqlite3
+    from dataclasses import replace
+
+    path = tmp_path / "results.sqlite"
+
+    def columns() -> list[str]:
+        with sqlite3.connect(path) as c:
+            return [r[1] for r in c.execute("PRAGMA table_info(episodes)")]
+
+    with ResultStore(path) as store:
+        store.put(_rec("plain"))
+        store.put(replace(_rec("asker"), asks=1))
+        before = columns()
+        assert "guard_repaired" not in before and "asks" in before
+        store.put(replace(_rec("a+guard:plan+navigator"), guard_checked=2, guard_blocked=2, guard_repaired=2))
+    assert columns() == [*before, "guard_repaired"]
+    with ResultStore(path, readonly=True) as store:
+        got = {r.agent: r.guard_repaired for r in store.records()}
+    assert got == {"plain": 0, "asker": 0, "a+guard:plan+navigator": 2}

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from icrsumo.core.defaults import DEFAULT_AGENT, DEFAULT_SUITE
 
-from .options import add_llm_options, add_traffic, agent_specs, split_list
+from .options import add_llm_options, add_on_block, add_traffic, agent_specs, split_list
 from .registry import Commands
 
 
@@ -46,6 +46,7 @@ def add(sub: Commands) -> None:
                     "checkpoint): delete them and run this one (repeatable)")
     at.add_argument("--guard", action="append", metavar="NAME",
                     help="also attack every agent behind this instruction guard (as evaluate's; repeatable)")
+    add_on_block(at)
     at.set_defaults(func=run)
 
 
@@ -62,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
                          workers=args.workers, traffic=args.traffic, quiet=args.quiet, compare=args.compare,
                          agent_timeout=timeout,
                          replace_agents=split_list(args.replace_agent, "--replace-agent"),
-                         guards=split_list(args.guard, "--guard"),
+                         guards=split_list(args.guard, "--guard"), on_block=args.on_block,
                          **({"agents": agents} if agents else {}))
     doc = run_attack(opts)
     if not args.quiet:

@@ -13,7 +13,7 @@ from icrsumo.core.defaults import DEFAULT_AGENT, DEFAULT_SUITE
 from icrsumo.core.vocab import CONTROL_FAMILIES, DELIVERY_FAMILIES, FAMILIES
 from icrsumo.scoring import DEFAULT_SCORING, scoring_names
 
-from .options import add_llm_options, add_traffic, agent_specs, split_list, suites
+from .options import add_llm_options, add_on_block, add_traffic, agent_specs, split_list, suites
 from .registry import Commands
 
 
@@ -73,6 +73,7 @@ def add(sub: Commands) -> None:
     v.add_argument("--guard", action="append", metavar="NAME",
                    help="also run every agent behind this instruction guard, as its own rows "
                    "AGENT+guard:NAME: text, plan, llm:MODEL@URL or a plugin's (repeatable; docs/guards.md)")
+    add_on_block(v)
     v.add_argument("--asking", action="store_true",
                    help="agents may ask for clarification: the navigator answers with the route's next "
                    "maneuver 2 simulated seconds later, at most once per maneuver, and every ask is counted; "
@@ -97,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         inference_processes=args.inference_processes, baseline_bank=args.baseline_bank,
         retry_crashed=args.retry_crashed, scoring=args.scoring,
         replace_agents=split_list(args.replace_agent, "--replace-agent"),
-        guards=split_list(args.guard, "--guard"), asking=args.asking,
+        guards=split_list(args.guard, "--guard"), asking=args.asking, on_block=args.on_block,
     )
     again = (" (left out of every table, with their pairs; --retry-crashed runs them again)"
              if result.crashed else "")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import functools
 
+from icrsumo.core.defaults import BLOCK_POLICIES
 from icrsumo.core.errors import Field, InputError, check_key_env
 from icrsumo.core.resources import bundled_suites
 from icrsumo.world.traffic import TRAFFIC_LEVELS
@@ -36,6 +37,15 @@ def suites() -> str:
 def add_traffic(p: argparse.ArgumentParser) -> None:
     """Add ``--traffic LEVEL`` (default normal)."""
     p.add_argument("--traffic", choices=list(TRAFFIC_LEVELS), default="normal")
+
+
+def add_on_block(p: argparse.ArgumentParser) -> None:
+    """Add ``--on-block keep|navigator``: what an instruction a --guard blocks leaves the agent."""
+    p.add_argument("--on-block", choices=list(BLOCK_POLICIES), default=BLOCK_POLICIES[0],
+                   help="what an instruction a --guard blocks leaves the agent: keep, what it was shown "
+                   "before (default); navigator, the navigation plan's instruction for that stretch in "
+                   "the route's baseline words, in rows AGENT+guard:NAME+navigator; part of the out "
+                   "folder's configuration (docs/guards.md)")
 
 
 def add_llm_options(p: argparse.ArgumentParser) -> None:
