@@ -5,8 +5,6 @@ the summary, :mod:`icrsumo.reporting` writes them)."""
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Mapping
-from dataclasses import replace
 from pathlib import Path
 
 from icrsumo.core.errors import Field, InputError, note, note_names
@@ -52,15 +50,17 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
         why = not_shown_why or (f"they are of other agents, routes, families or k (icrsumo report {out} "
                                 f"shows all)")
         note(f"{not_shown} stored episodes are not in this report: {why}")
-    summary = summarize(records, suite=opts.suite, seed=opts.seed, k=opts.k, families=families,
-                        scoring=opts.scoring, digest=digest, decisions=decisions, answers=answers,
-                        rescored_short=rescored_short, not_in_report=not_shown, not_in_report_why=why)
     try:
         skipped = skipped_families(instr_dir)
     except InputError as err:  # the counts are extra: the tables are written without them
         note(f"no skipped-route counts: {err.line(note_names())}")
         skipped = {}
-    summary = with_skipped_routes(summary, skipped, {r.route_id for r in records})
+    routes = {r.route_id for r in records}
+    skipped_routes = Counter(f for rid, fams in skipped.items() if rid in routes for f in fams)
+    summary = summarize(records, suite=opts.suite, seed=opts.seed, k=opts.k, families=families,
+                        scoring=opts.scoring, digest=digest, decisions=decisions, answers=answers,
+                        rescored_short=rescored_short, not_in_report=not_shown, not_in_report_why=why,
+                        skipped_routes=skipped_routes)
     attribution = attribution_doc(records, decisions)
     table = write_report(summary, records, out, ends)
     write_attribution(summary, attribution, out)
@@ -74,18 +74,6 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     if not opts.quiet:
         print(table)
     return summary
-
-
-def with_skipped_routes(summary: Summary, skipped: Mapping[str, Mapping[str, str]],
-                        routes: set[str]) -> Summary:
-    """``summary`` with each family row's ``skipped_routes``: how many of ``routes`` the family
-    could not be built for (``skipped``: route -> family -> why, the instructions' index)."""
-    counts = Counter(f for rid, fams in skipped.items() if rid in routes for f in fams)
-    if not counts:
-        return summary
-    return replace(summary, agents={
-        name: replace(a, families={f: replace(b, skipped_routes=counts[f]) for f, b in a.families.items()})
-        for name, a in summary.agents.items()})
 
 
 def write_guards(summary: Summary, records: list[EpisodeRecord], out: Path) -> str:

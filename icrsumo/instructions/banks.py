@@ -363,3 +363,13 @@ def load_banks(folder: Path | None = None) -> Banks:
         h.update(name.encode() + (folder / f"{name}.json").read_bytes())
     return Banks(folder=folder, baseline=baseline, paraphrase=paraphrase, misleading=misleading,
                  ambiguity=ambiguity, noise=noise, sha256=h.hexdigest())
+
+
+def template_number(template_id: str) -> int | None:
+    """The number a bank template id ends with (``M.left.p07`` -> 7), None without one."""
+    digits = ""
+    for c in reversed(template_id):
+        if not c.isdigit():
+            break
+        digits = c + digits
+    return int(digits) if digits else None

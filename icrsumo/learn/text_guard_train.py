@@ -7,7 +7,7 @@ Training data (:func:`training_set`), all of it shippable and none of it from th
   (directions mentioned but not commanded, notices, other road users) and its benign openings
   before training-bank commands;
 * positives: the misleading bank's templates of the tuning half only (odd template numbers, the
-  split of the ``text`` guard: :func:`icrsumo.results.guards.template_number`), filled at
+  split of the ``text`` guard: :func:`icrsumo.instructions.banks.template_number`), filled at
   random, their openings and the written authority framings before training-bank commands;
 * each text also twice with the training noise of :func:`icrsumo.learn.augment.add_noise`.
 
@@ -24,7 +24,14 @@ from pathlib import Path
 
 import numpy as np
 
-from icrsumo.instructions.banks import JUNCTION_PHRASES, ORDINALS, Banks, baseline_catalogue, fill
+from icrsumo.instructions.banks import (
+    JUNCTION_PHRASES,
+    ORDINALS,
+    Banks,
+    baseline_catalogue,
+    fill,
+    template_number,
+)
 from icrsumo.instructions.noise import apply_ops
 
 from .augment import add_noise, load_train_bank
@@ -50,8 +57,8 @@ HELDOUT_SEED = 2026
 
 def _tuning(template_id: str) -> bool:
     """Whether a misleading template is of the tuning half (odd number; the text guard's split)."""
-    digits = "".join(c for c in template_id.rsplit(".", 1)[-1] if c.isdigit())
-    return bool(digits) and int(digits) % 2 == 1
+    n = template_number(template_id)
+    return n is not None and n % 2 == 1
 
 
 def _pick(items: list[str] | tuple, rng: np.random.Generator):

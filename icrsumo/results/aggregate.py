@@ -213,7 +213,8 @@ def _deltas(p: _Pairs, n_boot: int, boot_seed: int) -> dict[str, Any]:
 
 
 def _family_stats(p: _Pairs, *, p_value: float | None, n_boot: int, boot_seed: int, n_crashed: int,
-                  answers: bool, asking: bool, decisions: DecisionStats | None) -> FamilyStats:
+                  answers: bool, asking: bool, decisions: DecisionStats | None,
+                  skipped_routes: int = 0) -> FamilyStats:
     ds, rc, is_, rd, to = _absolute(p.paired)
     return FamilyStats(
         ds=ds, rc=rc, is_=is_, base_ds=_mean([b.ds for b in p.pair_base]),
@@ -223,7 +224,7 @@ def _family_stats(p: _Pairs, *, p_value: float | None, n_boot: int, boot_seed: i
         n_pairs=int(sum(len(d) for d in p.deltas)), n_crashed=int(n_crashed),
         unpaired=p.finished - len(p.paired), flips=Flips(p.lost, p.gained), p_value=p_value,
         answers=_answers(p.paired) if answers else None, decisions=decisions,
-        asking=_asks(p.paired) if asking else None)
+        asking=_asks(p.paired) if asking else None, skipped_routes=int(skipped_routes))
 
 
 def _turned(x: float | None) -> float | None:
@@ -293,9 +294,10 @@ class _Attribution:
 
 
 def _agent_stats(recs: list[EpisodeRecord], fams: tuple[str, ...], n_boot: int, boot_seed: int,
-                 attribution: _Attribution | None, asking: bool = False) -> AgentStats:
+                 attribution: _Attribution | None, asking: bool = False,
+                 skipped: Mapping[str, int] | None = None) -> AgentStats:
     """One agent's rows from its records ``recs`` (crashed ones included); ``asking``: every
-    row counts its asks for clarification."""
+    row counts its asks for clarification; ``skipped``: family -> routes it was not built for."""
     crashed = Counter(r.family for r in recs if r.status == "crashed")
     mine = [r for r in recs if r.status != "crashed"]
     base_recs = [r for r in mine if r.family == BASELINE]
@@ -310,7 +312,8 @@ def _agent_stats(recs: list[EpisodeRecord], fams: tuple[str, ...], n_boot: int, 
     pairs = {f: _Pairs.of([r for r in mine if r.family == f], base) for f in fams}
     adjusted = holm([pairs[f].p_value_raw for f in fams])
     families = {f: _family_stats(pairs[f], p_value=_rnd(p, 6), n_boot=n_boot, boot_seed=boot_seed,
-                                 n_crashed=crashed[f], answers=asked, asking=asking, decisions=decisions(f))
+                                 n_crashed=crashed[f], answers=asked, asking=asking, decisions=decisions(f),
+                                 skipped_routes=(skipped or {}).get(f, 0))
                 for f, p in zip(fams, adjusted)}
     ds, rc, is_, rd, to = _absolute(base_recs)
     baseline = BaselineStats(ds, rc, is_, rd, to, len(base_recs), crashed[BASELINE],
@@ -324,7 +327,8 @@ def summarize(records: Iterable[EpisodeRecord], *, suite: str, seed: int, k: int
               scoring: str | None = None, digest: str | None = None,
               decisions: Mapping[Key, Sequence[Decision]] | None = None,
               answers: Mapping[Key, Sequence[tuple[Any, Any]]] | None = None,
-              rescored_short: int = 0, not_in_report: int = 0, not_in_report_why: str = "") -> Summary:
+              rescored_short: int = 0, not_in_report: int = 0, not_in_report_why: str = "",
+              skipped_routes: Mapping[str, int] | None = None) -> Summary:
     """ICR-Drive summary of an evaluation (see the module docstring for the definitions).
 
     Only baseline records and records of ``families`` are considered; agents are listed in
@@ -336,6 +340,8 @@ def summarize(records: Iterable[EpisodeRecord], *, suite: str, seed: int, k: int
     (None: none does); ``answers``: a language-model agent's (intent, maneuver) pairs by key
     for its rows' answers' confusion. ``rescored_short``, ``not_in_report`` and its
     ``not_in_report_why``: counted in :class:`icrsumo.results.summary.EpisodeCounts`.
+    ``skipped_routes``: family -> how many of the evaluation's routes it could not be built for
+    (every agent's row of that family carries it).
     """
     fams = tuple(families)
     if BASELINE in fams:
@@ -345,7 +351,7 @@ def summarize(records: Iterable[EpisodeRecord], *, suite: str, seed: int, k: int
     attribution = None if decisions is None else _Attribution(decisions, answers)
     asking = any(r.asks for r in recs)
     agents = {agent: _agent_stats([r for r in recs if r.agent == agent], fams, n_boot, boot_seed, attribution,
-                                  asking)
+                                  asking, skipped_routes)
               for agent in sorted({r.agent for r in recs})}
     episodes = EpisodeCounts(len(recs) - n_crashed, n_crashed, rescored_short, not_in_report,
                              not_in_report_why)

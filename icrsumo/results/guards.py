@@ -43,6 +43,7 @@ import numpy as np
 from icrsumo.core.types import EpisodeRecord
 from icrsumo.core.vocab import EpisodeStatus, Family
 from icrsumo.guards.base import split_policy, split_row
+from icrsumo.instructions.banks import template_number
 
 from .aggregate import holm, paired_test
 from .summary import Block, FamilyStats, Summary
@@ -185,16 +186,6 @@ def guard_doc(summary: Summary, records: Sequence[EpisodeRecord]) -> dict[str, A
                     for r in rows.values() if r["guard"] == guard for f in PRESERVING)}}
         guards[guard] = entry
     return {"format": GUARD_FORMAT, "guards": guards, "rows": rows}
-
-
-def template_number(template_id: str) -> int | None:
-    """The number a bank template id ends with (``M.left.p07`` -> 7), None without one."""
-    digits = ""
-    for c in reversed(template_id):
-        if not c.isdigit():
-            break
-        digits = c + digits
-    return int(digits) if digits else None
 
 
 def text_holdout(guard, banks) -> dict[str, Any]:
