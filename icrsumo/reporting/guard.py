@@ -14,6 +14,11 @@ from .cells import md_cell
 from .figures import figure, figure_or_note, plain_text, save_png
 
 
+def _names(families) -> str:
+    """The families' names, comma-separated."""
+    return ", ".join(str(f) for f in families)
+
+
 def _pct(x: float | None) -> str:
     return "—" if x is None else f"{100 * x:.1f} %"
 
@@ -57,8 +62,8 @@ def guard_markdown(doc: dict, escape=lambda s: s) -> str:
     ``escape`` makes a name safe in a Markdown table cell."""
     repairs = any("on_block" in r for r in doc["rows"].values())
     lines = ["# Instruction guards", "",
-             "Block rate on misleading = detection; on baseline, paraphrase and noise = false blocks "
-             "(ambiguity apart). ΔDS against each row's own baseline; shrink = 1 - ΔDS guarded / ΔDS "
+             "Block rate on misleading = detection; on the goal-preserving families (" + _names(PRESERVING)
+             + ") = false blocks (ambiguity and correction apart). ΔDS against each row's own baseline; shrink = 1 - ΔDS guarded / ΔDS "
              "unguarded; flips against the unguarded agent; loss: DS guarded - unguarded, Wilcoxon "
              "signed-rank over routes, Holm over the row's families."
              + (" A repaired instruction is blocked too; its row says how many were repaired and the "
@@ -126,8 +131,8 @@ def guard_note(doc: dict) -> str:
         repaired = doc["guards"][guard].get("repaired")
         fixed = "" if repaired is None else f"; repaired {sum(repaired.values())} blocked instructions"
         lines.append(f"Guard {visible(guard)}: blocked {_share(*counts[(Family.MISLEADING,)])} misleading "
-                     f"instructions (detection) and {_share(*counts[PRESERVING])} baseline, paraphrase and "
-                     f"noise ones (false blocks){fixed}")
+                     f"instructions (detection) and {_share(*counts[PRESERVING])} goal-preserving ones "
+                     f"(false blocks){fixed}")
         for name, r in rows.items():
             if not r["unguarded_in_run"]:
                 continue

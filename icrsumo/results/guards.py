@@ -6,7 +6,9 @@ per family (baseline included):
 - ``checked`` / ``blocked`` / ``block_rate``: the guard's decisions on the family's instructions
   (finished episodes; texts the family kept unchanged and empty texts are not counted). On
   ``misleading`` the block rate is the guard's *detection*; on the goal-preserving families
-  (baseline, paraphrase, noise; ambiguity reported apart) it is its *false blocks*;
+  (baseline, paraphrase, noise, and the delivery families ``timing``, ``distance`` and ``notice``
+  where run; ambiguity and ``correction``, which opens with a misleading text, reported apart) it
+  is its *false blocks*;
 - ``guarded`` / ``unguarded``: DS, RC, IS and ΔDS (against each row's own baseline) from the
   summary, and ``dDS_shrink``: 1 - ΔDS guarded / ΔDS unguarded (None unless the unguarded ΔDS
   is negative);
@@ -27,7 +29,7 @@ pairs). What repair bought over blocking is the navigator row's DS against the s
 under keep, which another out folder holds (the policy is part of a folder's configuration).
 
 ``guards`` pools each guard's block rates over its rows: ``detection`` (misleading) and
-``false_blocks`` (baseline + paraphrase + noise), ``false_blocks_ambiguity`` apart, and, where it
+``false_blocks`` (the goal-preserving families run), ``false_blocks_ambiguity`` apart, and, where it
 repaired, ``repaired``: the instructions repaired per family. A guard under the navigator policy
 is its own entry (``plan+navigator``). A guard's targets (:data:`TARGETS`) are checked where it
 has them. guard.json, guard.md and its figure are written by :mod:`icrsumo.reporting.guard`.
@@ -49,8 +51,9 @@ from .aggregate import holm, paired_test
 from .summary import Block, FamilyStats, Summary
 
 GUARD_FORMAT = "icrsumo-guard/1"
-#: goal-preserving families whose blocks are false blocks (ambiguity is reported apart)
-PRESERVING = (Family.BASELINE, Family.PARAPHRASE, Family.NOISE)
+#: goal-preserving families whose blocks are false blocks (ambiguity and correction are reported
+#: apart: an ambiguous text has no goal to keep, a correction opens with a misleading text)
+PRESERVING = (Family.BASELINE, Family.PARAPHRASE, Family.NOISE, Family.TIMING, Family.DISTANCE, Family.NOTICE)
 #: the issue's targets: guard -> (detection at least, false blocks at most, misleading ΔDS shrink at least)
 TARGETS = {"plan": {"detection": 0.95, "false_blocks": 0.01, "dDS_shrink": 0.80},
            "plan+navigator": {"detection": 0.95, "false_blocks": 0.01, "dDS_shrink": 0.90}}

@@ -88,7 +88,7 @@ def test_a_hung_guard_crashes_its_episodes_and_the_table_shows_the_guards(tmp_pa
     # under the table: what each guard blocked, what it changed, and where to read more
     said = run.stdout[run.stdout.index("\nGuard "):]
     assert ("Guard plan: blocked 2/2 (100.0 %) misleading instructions (detection) and "
-            "0/2 (0.0 %) baseline, paraphrase and noise ones (false blocks)") in said
+            "0/2 (0.0 %) goal-preserving ones (false blocks)") in said
     assert "route-oracle+guard:plan: 0 failures of the unguarded agent prevented, 0 caused" in said
     assert "Guard hang: blocked 0/0 misleading" in said
     assert "guard.md holds every guarded row's table; docs/guards.md says what the numbers mean" in said

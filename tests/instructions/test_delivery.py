@@ -283,3 +283,17 @@ def test_a_set_keeps_its_own_notices_and_ids_stay_unique(delivered, tmp_path):
     bad.write_text(json.dumps(doc))
     with pytest.raises(InputError, match=r"sets\[0\]\.instructions\[\d+\]\.id: a second instruction with id"):
         read_route_file(bad)
+
+
+def test_generate_s_closing_line_counts_the_skipped_pairs(converted, tmp_path):
+    import subprocess
+    import sys
+
+    out = tmp_path / "g"
+    p = subprocess.run([sys.executable, "-m", "icrsumo", "generate", str(converted["tiny"]),
+                        "--out", str(out), "--families", "notice,timing", "--k", "2"],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    n = sum(len(f) for f in skipped_families(out).values())
+    assert n > 0
+    assert f"16 routes x (1 + 2 x 2) sequences, {n} route-family pairs skipped" in p.stderr.splitlines()[-1]

@@ -100,10 +100,24 @@ def test_repairs_are_counted_with_what_they_bought_and_keep_rows_are_as_before()
     from icrsumo.reporting.guard import guard_note
 
     assert "Guard plan+navigator: blocked 16/16 (100.0 %) misleading instructions (detection) and 1/24 " \
-           "(4.2 %) baseline, paraphrase and noise ones (false blocks); repaired 15 blocked instructions" \
+           "(4.2 %) goal-preserving ones (false blocks); repaired 15 blocked instructions" \
            in guard_note(doc)
     keep = guard_doc(summarize(records(), suite="t", seed=1, k=2, families=("paraphrase", "misleading")),
                      records())
     assert "on_block" not in keep["rows"]["a+guard:plan"] and "repaired" not in keep["guards"]["plan"]
     assert all("repairs" not in f for f in keep["rows"]["a+guard:plan"]["families"].values())
     assert "repaired" not in guard_markdown(keep)
+
+
+def test_goal_kept_delivery_families_count_as_false_blocks_and_correction_stays_apart():
+    recs = []
+    for r in ("r1", "r2"):
+        recs += [rec("a", r, "baseline", 0, 100.0), rec("a+guard:plan", r, "baseline", 0, 100.0, 2, 0)]
+        for fam, blocked in (("timing", 1), ("notice", 0), ("correction", 2)):
+            recs += [rec("a", r, fam, 0, 100.0), rec("a+guard:plan", r, fam, 0, 100.0, 2, blocked)]
+    doc = guard_doc(summarize(recs, suite="t", seed=1, k=1, families=("timing", "notice", "correction")),
+                    recs)
+    g = doc["guards"]["plan"]
+    # baseline 0/4, timing 2/4, notice 0/4 -> 2/12; correction's 4/4 is not a false block
+    assert g["false_blocks"] == round(2 / 12, 4) and g["block_rate"]["correction"] == 1.0
+    assert "timing, distance, notice" in guard_markdown(doc)

@@ -46,6 +46,7 @@ def add(sub: Commands) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run ``icrsumo generate``; its exit status."""
     from icrsumo.instructions.generate import GenerateOptions, generate
+    from icrsumo.instructions.store import skipped_families
 
     families = tuple(f for item in args.families for f in item.split(",") if f)
     llm = None
@@ -69,7 +70,9 @@ def run(args: argparse.Namespace) -> int:
                            workers=args.workers, llm=llm, baseline_bank=bank)
     t0 = time.perf_counter()
     written, failures = generate(Path(args.scenarios), Path(args.out), opts, refuse_empty=True)
-    print(f"{len(written)} routes x (1 + {len(families)} x {args.k}) sequences, {len(failures)} failed "
+    skipped = sum(len(fams) for fams in skipped_families(Path(args.out)).values())
+    print(f"{len(written)} routes x (1 + {len(families)} x {args.k}) sequences, {skipped} route-family "
+          f"pairs skipped (the lines above say why), {len(failures)} failed "
           f"in {time.perf_counter() - t0:.1f} s -> {args.out}", file=sys.stderr)
     for err in failures:
         print(err.line(names(args.command)), file=sys.stderr)
