@@ -1,5 +1,6 @@
 """A test oracle: CARLA Leaderboard 1.0's route scoring transcribed in the leaderboard's own
-shape, independently of icrsumo.scoring's rule code, to score a recorded episode log.
+shape, independently of icrsumo.scoring's rule code, to score a recorded episode log, and its
+results file (the final commit of branch ``leaderboard-1.0``) built from stored records.
 
 One class per criterion of scenario_runner's ``atomic_criteria.py`` (branch ``leaderboard-1.0``)
 as ``route_scenario.py`` builds them, each with an ``update()`` per tick (a logged step) and the
@@ -7,13 +8,18 @@ collision sensor's callback before the criteria tick; ``compute_route_statistics
 ``leaderboard/utils/statistics_manager.py``. The map is what the log recorded: the route
 points (icrsumo's dense route of the log's polyline) and the per-step lane bits; everything
 else is the leaderboard's arithmetic, written here again on purpose.
+
+The results file (:func:`results_file`): ``compute_route_length``, the route record
+``compute_route_statistics`` registers for a stored episode (:func:`route_record`),
+``compute_global_statistics`` and ``save_global_record``, and the route loop of
+``leaderboard_evaluator.py`` that decides ``entry_status`` (a simulation crash ends the run).
 """
 
 from __future__ import annotations
 
 import math
 
-from icrsumo.core.types import EpisodeLog
+from icrsumo.core.types import EpisodeLog, EpisodeRecord
 from icrsumo.scoring.route import dense_route
 
 PENALTY_COLLISION_PEDESTRIAN = 0.50
@@ -222,3 +228,215 @@ def score(log: EpisodeLog) -> dict:
     score_route = 100.0 if completion.success else completion._percentage_route_completed
     return {"score_route": score_route, "score_penalty": score_penalty,
             "score_composed": max(score_route * score_penalty, 0.0), "ended": ended}
+
+
+# ------------------------------------------------------------------ the results file
+INFRACTION_KEYS = ("collisions_pedestrian", "collisions_vehicle", "collisions_layout", "red_light",
+                   "stop_infraction", "outside_route_lanes", "route_dev", "route_timeout", "vehicle_blocked")
+#: the traffic event of a stored infraction kind: (infraction key, penalty; None: the percentage's)
+EVENTS = {"collision_pedestrian": ("collisions_pedestrian", PENALTY_COLLISION_PEDESTRIAN),
+          "collision_vehicle": ("collisions_vehicle", PENALTY_COLLISION_VEHICLE),
+          "collision_static": ("collisions_layout", PENALTY_COLLISION_STATIC),
+          "red_light": ("red_light", PENALTY_TRAFFIC_LIGHT), "stop_sign": ("stop_infraction", PENALTY_STOP),
+          "outside_route_lanes": ("outside_route_lanes", None)}
+#: how icrsumo's terminations map onto the criteria that end a route: (infraction key, failure)
+ENDINGS = {"route_deviation": ("route_dev", "Agent deviated from the route"),
+           "route_timeout": ("route_timeout", "Agent timed out"),
+           "agent_blocked": ("vehicle_blocked", "Agent got blocked"),
+           "stuck": ("vehicle_blocked", "Agent got blocked")}
+
+
+def compute_route_length(trajectory) -> float:
+    """The sum of the straight distances between consecutive points of the route's trajectory."""
+    length = 0.0
+    for a, b in zip(trajectory, trajectory[1:]):
+        length += math.sqrt(sum((q - p) ** 2 for p, q in zip(a, b)))
+    return length
+
+
+def crash_message(rec: EpisodeRecord) -> str:
+    """The evaluator's ``crash_message`` for a stored episode: "Simulation crashed" when SUMO
+    died in it (termination sim_error) or, for a crashed episode, when SUMO failed to start or
+    the worker process died (icrsumo's convention); "Agent crashed" for any other crash; ""."""
+    if rec.status == "crashed":
+        sim = rec.message.startswith(("SimulatorError:", "WorkerDied:"))
+        return "Simulation crashed" if sim else "Agent crashed"
+    return "Simulation crashed" if rec.termination == "sim_error" else ""
+
+
+def route_record(rec: EpisodeRecord, index: int, route_id: str, trajectory) -> dict:
+    """``compute_route_statistics`` for a stored episode: its infractions are the criteria's
+    traffic events, its termination the criterion that ended it; a crashed episode has no
+    scenario (nothing was recorded)."""
+    record = {"route_id": route_id, "index": index, "status": "Started",
+              "infractions": {k: [] for k in INFRACTION_KEYS},
+              "scores": {"score_route": 0, "score_penalty": 0, "score_composed": 0}, "meta": {}}
+    failure = crash_message(rec)
+    score_penalty, score_route, target_reached = 1.0, 0.0, False
+    record["meta"]["duration_system"] = -1
+    record["meta"]["duration_game"] = rec.duration
+    record["meta"]["route_length"] = compute_route_length(trajectory)
+    if rec.status != "crashed":
+        for kind, factor in rec.infractions:
+            key, penalty = EVENTS[kind]
+            score_penalty *= factor if penalty is None else penalty
+            record["infractions"][key].append(kind)
+        if rec.termination in ENDINGS:
+            key, failure = ENDINGS[rec.termination]
+            record["infractions"][key].append(rec.termination)
+        if rec.termination == "completed":
+            score_route, target_reached = 100.0, True
+        else:
+            score_route = rec.rc
+    record["scores"] = {"score_route": score_route, "score_penalty": score_penalty,
+                        "score_composed": max(score_route * score_penalty, 0.0)}
+    record["status"] = "Completed" if target_reached else "Failed" + (" - " + failure if failure else "")
+    return record
+
+
+def compute_global_statistics(records: list[dict], total_routes: int) -> dict:
+    glob = {"route_id": -1, "index": -1, "status": "Completed",
+            "infractions": {k: [] for k in INFRACTION_KEYS},
+            "scores": {"score_route": 0, "score_penalty": 0, "score_composed": 0},
+            "meta": {"total_length": 0, "duration_system": 0, "duration_game": 0},
+            "scores_std_dev": {"score_route": 0, "score_penalty": 0, "score_composed": 0}}
+    if not records:
+        return glob
+    for record in records:
+        for k in glob["scores"]:
+            glob["scores"][k] += record["scores"][k]
+        for k in ("duration_game", "duration_system"):
+            glob["meta"][k] += record["meta"][k]
+        glob["meta"]["total_length"] += record["meta"]["route_length"]
+        for k in INFRACTION_KEYS:
+            if isinstance(glob["infractions"][k], list):
+                glob["infractions"][k] = 0
+            if record["scores"]["score_route"] == 0:  # the vehicle has not moved
+                continue
+            km = record["scores"]["score_route"] / 100 * record["meta"]["route_length"] / 1000.0
+            glob["infractions"][k] += len(record["infractions"][k]) / km
+        if record["status"] != "Completed":
+            glob["status"] = "Failed"
+            glob["meta"].setdefault("exceptions", []).append(
+                (record["route_id"], record["index"], record["status"]))
+    for k in glob["scores"]:
+        glob["scores"][k] /= float(total_routes)
+    if total_routes == 1:
+        glob["scores_std_dev"] = {k: "NaN" for k in glob["scores_std_dev"]}
+    else:
+        for k in glob["scores_std_dev"]:
+            sq = sum((record["scores"][k] - glob["scores"][k]) ** 2 for record in records)
+            glob["scores_std_dev"][k] = math.sqrt(sq / float(total_routes - 1))
+    return glob
+
+
+def save_global_record(data: dict, glob: dict, total_routes: int) -> None:
+    data["_checkpoint"]["global_record"] = glob
+    data["values"] = ["{:.3f}".format(glob["scores"][k])
+                      for k in ("score_composed", "score_route", "score_penalty")] + [
+        "{:.3f}".format(glob["infractions"][k]) for k in INFRACTION_KEYS]
+    data["labels"] = ["Avg. driving score", "Avg. route completion", "Avg. infraction penalty",
+                      "Collisions with pedestrians", "Collisions with vehicles", "Collisions with layout",
+                      "Red lights infractions", "Stop sign infractions", "Off-road infractions",
+                      "Route deviations", "Route timeouts", "Agent blocked"]
+    records, progress = data["_checkpoint"]["records"], data["_checkpoint"]["progress"]
+    entry, eligible = "Finished", True
+    if len(records) != total_routes or progress[0] != progress[1]:
+        entry, eligible = "Finished with missing data", False
+    elif any("Agent" in record["status"] for record in records):
+        entry = "Finished with agent errors"
+    data["entry_status"], data["eligible"] = entry, eligible
+
+
+def results_file(route_records: list[dict]) -> dict:
+    """The leaderboard evaluator's run over routes whose statistics are ``route_records`` (in
+    the order run): each is saved with entry_status 'Started' (or 'Crashed' after a simulation
+    crash, which ends the run there, without a global record); after the last route, the global
+    record and the final entry_status."""
+    total = len(route_records)
+    data = {"sensors": [], "values": [], "labels": [], "entry_status": "", "eligible": "",
+            "_checkpoint": {"progress": [0, total], "records": [], "global_record": {}}}
+    for i, record in enumerate(route_records):
+        data["_checkpoint"]["records"].append(record)
+        crashed = record["status"] == "Failed - Simulation crashed"
+        data["entry_status"], data["eligible"] = ("Crashed" if crashed else "Started"), False
+        if crashed:
+            return data
+        data["_checkpoint"]["progress"] = [i + 1, total]
+    save_global_record(data, compute_global_statistics(route_records, total), total)
+    return data
+
+
+def leaderboard_file(records: list[EpisodeRecord], key_points: dict | None = None) -> dict:
+    """:func:`results_file` of one agent's and family's stored episodes, run in icrsumo's order
+    (route id, k, seed); a route's trajectory is its key points (``key_points``: route id ->
+    points) or, where they are not known, a straight line of the record's length."""
+    ordered = sorted(records, key=lambda r: (r.route_id, r.k, r.seed))
+    return results_file([
+        route_record(r, i, f"RouteScenario_{r.route_id}_{r.family}_{r.k}",
+                     (key_points or {}).get(r.route_id) or [(0.0, 0.0), (r.length, 0.0)])
+        for i, r in enumerate(ordered)])
+
+
+def _near(a, b, tol: float) -> bool:
+    if isinstance(a, str) or isinstance(b, str):
+        return a == b
+    return abs(a - b) <= tol * max(1.0, abs(b))
+
+
+def differences(mine: dict, ref: dict, tol: float = 1e-4) -> list[str]:
+    """Where icrsumo's results file ``mine`` differs from the transcription's ``ref``: statuses,
+    infraction counts, per-route and global scores and lengths, rates (relative to values
+    above 1, absolute below, within ``tol``), ``values``, exceptions, entry status. Not
+    compared: the infraction messages (icrsumo words its own) and ``duration_system`` (icrsumo
+    keeps no wall clock). When ``ref`` ended at a simulation crash, its records are compared
+    with the first ones of ``mine`` and its global record is not (icrsumo writes every route)."""
+    out = []
+    for k in ("entry_status", "eligible", "sensors"):
+        if mine[k] != ref[k]:
+            out.append(f"{k}: {mine[k]!r} != {ref[k]!r}")
+    rr, mr = ref["_checkpoint"]["records"], mine["_checkpoint"]["records"]
+    stopped = ref["entry_status"] == "Crashed"
+    if len(mr) < len(rr) or (not stopped and len(mr) != len(rr)):
+        out.append(f"{len(mr)} records != {len(rr)}")
+    for m, r in zip(mr, rr):
+        where = f"record {r['index']}"
+        for k in ("route_id", "index", "status"):
+            if m[k] != r[k]:
+                out.append(f"{where} {k}: {m[k]!r} != {r[k]!r}")
+        counts = [{k: len(v) for k, v in x["infractions"].items()} for x in (m, r)]
+        if counts[0] != counts[1]:
+            out.append(f"{where} infractions: {counts[0]} != {counts[1]}")
+        for k, v in r["scores"].items():
+            if not _near(m["scores"][k], v, tol):
+                out.append(f"{where} {k}: {m['scores'][k]} != {v}")
+        for k in ("route_length", "duration_game"):
+            if not _near(m["meta"][k], r["meta"][k], tol):
+                out.append(f"{where} meta.{k}: {m['meta'][k]} != {r['meta'][k]}")
+    if stopped:
+        return out
+    if mine["labels"] != ref["labels"]:
+        out.append(f"labels: {mine['labels']!r} != {ref['labels']!r}")
+    if mine["_checkpoint"]["progress"] != ref["_checkpoint"]["progress"]:
+        out.append(f"progress: {mine['_checkpoint']['progress']} != {ref['_checkpoint']['progress']}")
+    mg, rg = mine["_checkpoint"]["global_record"], ref["_checkpoint"]["global_record"]
+    for k in ("route_id", "index", "status"):
+        if mg[k] != rg[k]:
+            out.append(f"global {k}: {mg[k]!r} != {rg[k]!r}")
+    for part in ("infractions", "scores", "scores_std_dev"):
+        for k, v in rg[part].items():
+            if not _near(mg[part][k], v, tol):
+                out.append(f"global {part}.{k}: {mg[part][k]} != {v}")
+    for k in ("total_length", "duration_game"):
+        if not _near(mg["meta"][k], rg["meta"][k], tol):
+            out.append(f"global meta.{k}: {mg['meta'][k]} != {rg['meta'][k]}")
+    want = [list(e) for e in rg["meta"]["exceptions"]] if "exceptions" in rg["meta"] else None
+    got = mg["meta"].get("exceptions")
+    if got != want:
+        out.append(f"global meta.exceptions: {got!r} != {want!r}")
+    for i, (a, b) in enumerate(zip(mine["values"], ref["values"])):
+        if not _near(float(a), float(b), 1e-3 + tol):
+            out.append(f"values[{i}]: {a} != {b}")
+    if len(mine["values"]) != len(ref["values"]):
+        out.append(f"{len(mine['values'])} values != {len(ref['values'])}")
+    return out

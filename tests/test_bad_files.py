@@ -419,6 +419,8 @@ _SCENARIO_CASES = [
     (("route", "polyline"), [[0, 0], [1]], "route.polyline[1]: must be [x, y], not 1 numbers"),
     (("route", "polyline", 0, 0), 10 ** 400, "route.polyline[0][0]: polyline[0][0] must be a finite number"),
     (("route", "length"), None, "route.length: length must be a number, not null"),
+    (("waypoints",), [[0, 0]], "waypoints: has 1 entries, needs at least 2"),
+    (("waypoints", 1), [1, 2, 3], "waypoints[1]: must be [x, y], not 3 numbers"),
     (("seed",), -3, "seed: seed = -3 is out of range"),
     (("step_length",), 0, "step_length: step_length = 0 is out of range"),
     (("traffic", "level"), "gridlock", "traffic.level: unknown traffic level 'gridlock'"),

@@ -14,7 +14,7 @@ from icrsumo.instructions.store import skipped_families
 from icrsumo.results.store import ResultStore
 from icrsumo.results.summary import Summary
 from icrsumo.world.convert import safe_name
-from icrsumo.world.scenario import find_scenarios, read_scenario
+from icrsumo.world.scenario import Scenario, find_scenarios, read_scenario
 
 from .options import EvalOptions
 
@@ -62,10 +62,12 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
                         rescored_short=rescored_short, not_in_report=not_shown, not_in_report_why=why,
                         skipped_routes=skipped_routes)
     attribution = attribution_doc(records, decisions)
-    table = write_report(summary, records, out, ends)
+    scen = route_scenarios(scenarios)
+    table = write_report(summary, records, out, ends,
+                         key_points={rid: sc.key_points for rid, sc in scen.items() if sc.key_points})
     write_attribution(summary, attribution, out)
     table += write_guards(summary, records, out)
-    write_html(out, summary, records, attribution, store, scenarios, instr_dir)
+    write_html(out, summary, records, attribution, store, scen, instr_dir)
     try:
         rollout_figure(out, store, records, scenarios, instr_dir, route=opts.rollout_route, seed=opts.seed,
                        families=opts.families)
@@ -109,15 +111,10 @@ def store_digest(store: ResultStore, scoring: str) -> str | None:
         return None
 
 
-def write_html(out: Path, summary: Summary, records: list[EpisodeRecord], attribution: dict,
-               store: ResultStore, scenarios: Path, instr_dir: Path) -> None:
-    """OUT/report.html (:mod:`icrsumo.reporting.html`) from the stored logs, the routes'
-    instruction files and networks; a route whose files cannot be read is drawn without them."""
-    from icrsumo.instructions.store import read_instruction_sets
-    from icrsumo.render import BevRenderer, map_view_png
-    from icrsumo.reporting.html import write_html_report
-    from icrsumo.world.networks import load_net
-
+def route_scenarios(scenarios: Path) -> dict[str, Scenario]:
+    """Route id -> its scenario, for every scenario of the convert-routes folder ``scenarios``
+    that can be read ({} when it is none): a route whose scenario cannot be read is left out,
+    and what needs it does without."""
     scen = {}
     if Path(scenarios).is_dir() and (Path(scenarios) / "index.json").is_file():
         for d in find_scenarios(scenarios):
@@ -126,6 +123,19 @@ def write_html(out: Path, summary: Summary, records: list[EpisodeRecord], attrib
             except InputError:
                 continue
             scen[sc.route_id] = sc
+    return scen
+
+
+def write_html(out: Path, summary: Summary, records: list[EpisodeRecord], attribution: dict,
+               store: ResultStore, scen: dict[str, Scenario], instr_dir: Path) -> None:
+    """OUT/report.html (:mod:`icrsumo.reporting.html`) from the stored logs, the routes'
+    instruction files and networks (``scen``: :func:`route_scenarios`); a route whose files
+    cannot be read is drawn without them."""
+    from icrsumo.instructions.store import read_instruction_sets
+    from icrsumo.render import BevRenderer, map_view_png
+    from icrsumo.reporting.html import write_html_report
+    from icrsumo.world.networks import load_net
+
     loaded_nets: dict[str, object] = {}
     renderers: dict[str, BevRenderer] = {}
 

@@ -8,7 +8,7 @@ leaderboard results file. A rule set subclasses :class:`Scoring` in one module
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping, Sequence
 from typing import ClassVar
 
 from icrsumo.core.types import EpisodeLog, EpisodeRecord, EpisodeResult, Event, Infraction
@@ -22,6 +22,8 @@ from .route import DenseRoute
 #: beyond that (the monitor ends every episode first; this only bounds the loop)
 BUDGET_MARGIN_S = 10.0
 BUDGET_MARGIN_STEPS = 10
+#: route id -> the route file's key points (its waypoints, m), where known
+KeyPoints = Mapping[str, Sequence[Sequence[float]]]
 
 
 class Scoring(ABC):
@@ -45,8 +47,11 @@ class Scoring(ABC):
         (the dense route's) can last before its route timeout."""
 
     @abstractmethod
-    def leaderboard_file(self, records: Iterable[EpisodeRecord], agent: str, family: str) -> dict:
-        """The episodes of one agent and family as the leaderboard's results file (JSON-ready)."""
+    def leaderboard_file(self, records: Iterable[EpisodeRecord], agent: str, family: str,
+                         key_points: KeyPoints | None = None) -> dict:
+        """The episodes of one agent and family as the leaderboard's results file (JSON-ready).
+        ``key_points``: route id -> the route file's waypoints (m), where known, for a file
+        whose route length is theirs."""
 
     def route_infractions(self, log: EpisodeLog, mon: TerminationMonitor | None) -> list[Infraction]:
         """The infractions of the route criteria's finished monitor: outside route lanes, only

@@ -26,9 +26,9 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 from icrsumo.core.types import EpisodeLog, EpisodeRecord, Event
-from icrsumo.core.vocab import EventKind
+from icrsumo.core.vocab import EpisodeStatus, EventKind
 
-from .base import Scoring
+from .base import KeyPoints, Scoring
 from .criteria import EPS, OFF_LANES, WRONG_LANE, RouteRules, events_by_step, route_timeout
 from .leaderboard import LABELS, agent_records, record_infractions, route_name
 from .penalties import MAX_ID_TIME, contacts
@@ -104,75 +104,112 @@ def _wording(r: EpisodeRecord, kind: str, factor: float) -> tuple[str, str] | No
     return None
 
 
-def _lb_record(r: EpisodeRecord, index: int) -> dict:
+def key_point_length(points: Sequence[Sequence[float]]) -> float:
+    """``compute_route_length``: the sum of the straight distances (m) between consecutive key
+    points of a route (the route file's waypoints)."""
+    return sum(math.dist(a, b) for a, b in zip(points, points[1:]))
+
+
+def lb_route_length(r: EpisodeRecord, key_points: KeyPoints | None) -> float:
+    """The leaderboard's route length (m) of ``r``'s route: its key points' length
+    (:func:`key_point_length`), or the record's ``length`` (the route along its lanes) where
+    they are not known."""
+    points = (key_points or {}).get(r.route_id, ())
+    length = key_point_length(points) if len(points) >= 2 else 0.0
+    return round(length, 6) if length > 0 else r.length
+
+
+def _lb_record(r: EpisodeRecord, index: int, length: float) -> dict:
+    """One route's record. A crashed episode has no log: scores 0, 1 and 0, what the leaderboard
+    writes for a route whose criteria recorded nothing."""
     status, infr = record_infractions(r, LB_INFRACTIONS, _wording)
+    crashed = r.status == EpisodeStatus.CRASHED
     return {
         "route_id": route_name(r),
         "index": index,
         "status": status,
         "infractions": infr,
-        "scores": {"score_route": r.rc, "score_penalty": r.is_, "score_composed": r.ds},
-        "meta": {"route_length": r.length, "duration_game": r.duration, "duration_system": -1},
+        "scores": {"score_route": 0.0 if crashed else r.rc, "score_penalty": 1.0 if crashed else r.is_,
+                   "score_composed": 0.0 if crashed else r.ds},
+        "meta": {"route_length": length, "duration_game": r.duration, "duration_system": -1},
     }
 
 
-def leaderboard_checkpoint(records: Iterable[EpisodeRecord], agent: str, family: str) -> dict:
+def _rates(recs: Sequence[dict]) -> dict[str, float]:
+    """Each infraction's rate: the sum over routes of the route's count over its km of route
+    completed (RC / 100 x route length); a route with RC 0 adds nothing."""
+    infr = {k: 0.0 for k in LB_INFRACTIONS}
+    for rec in recs:
+        rc = rec["scores"]["score_route"]
+        if rc == 0:
+            continue
+        km = rc / 100.0 * rec["meta"]["route_length"] / 1000.0
+        for k in LB_INFRACTIONS:
+            infr[k] += len(rec["infractions"][k]) / km
+    return {k: round(v, 6) for k, v in infr.items()}
+
+
+def _entry_status(statuses: Sequence[str]) -> tuple[str, bool]:
+    """``entry_status`` and ``eligible``: 'Crashed' (not eligible) when a simulation crashed, else
+    'Finished with agent errors' when a status names the agent, else 'Finished'."""
+    if "Failed - Simulation crashed" in statuses:
+        return "Crashed", False
+    if any("Agent" in st for st in statuses):
+        return "Finished with agent errors", True
+    return "Finished", True
+
+
+def leaderboard_checkpoint(records: Iterable[EpisodeRecord], agent: str, family: str,
+                           key_points: KeyPoints | None = None) -> dict:
     """The episodes of one agent and family as a CARLA Leaderboard 1.0 checkpoint (``result.json``).
 
-    Reproduces ``leaderboard/utils/statistics_manager.py`` (branch ``leaderboard-1.0``,
-    ``compute_global_statistics`` and ``save_global_record``): records sorted by (route_id, k,
-    seed); the global scores are means over *every* record, crashed ones included (their scores
-    are 0), with the sample standard deviation; each infraction rate is the sum over records of
-    the record's count / max(RC / 100 x route km, 0.001); every record that is not 'Completed' is
-    in ``meta.exceptions``. ``entry_status``: 'Crashed' (not eligible) when an episode's simulation
-    crashed, else 'Finished with agent errors' when any record's status names the agent (as
-    the leaderboard's substring test does: deviations, timeouts and blocks included), else
-    'Finished'. The global ``meta`` also holds ``total_length`` (m) and ``duration_game`` (s),
-    summed, and ``duration_system`` -1 (icrsumo does not time episodes by wall clock; -1 is the
-    leaderboard's value for a duration it was not given)."""
+    Reproduces ``leaderboard/utils/statistics_manager.py`` (the final ``leaderboard-1.0``
+    branch, ``compute_global_statistics`` and ``save_global_record``): records sorted by
+    (route_id, k, seed); each route's length is its key points' (``key_points``: route id ->
+    the route file's waypoints, m; the record's ``length`` where not given); a crashed episode
+    scores RC 0, IS 1, DS 0 (no log: no criterion recorded anything) with the status 'Failed -
+    Agent crashed' or 'Failed - Simulation crashed'
+    (:func:`~icrsumo.scoring.leaderboard.route_status`); the global scores are means over
+    *every* record, with the sample standard deviation; each infraction rate is the sum over
+    records with RC > 0 of the record's count / (RC / 100 x route km); every record that is
+    not 'Completed' is in ``meta.exceptions`` (absent when there is none). ``entry_status``:
+    'Crashed' (not eligible) when a simulation crashed, else 'Finished with agent errors' when
+    any record's status names the agent (as the leaderboard's substring test does:
+    deviations, timeouts, blocks and agent crashes included), else 'Finished'. The global
+    ``meta`` also holds ``total_length`` (m) and ``duration_game`` (s), summed, and
+    ``duration_system`` -1 (icrsumo does not time episodes by wall clock; -1 is the
+    leaderboard's value for a duration it was not given). The leaderboard stops at a simulation
+    crash; here every record is in the file and in the global record."""
     import numpy as np  # here: the command line reads the registry without numpy
 
     mine = agent_records(records, agent, family)
-    recs = [_lb_record(r, i) for i, r in enumerate(mine)]
+    recs = [_lb_record(r, i, lb_route_length(r, key_points)) for i, r in enumerate(mine)]
     n = len(recs)
-    infr = {k: 0.0 for k in LB_INFRACTIONS}
-    for r, rec in zip(mine, recs):
-        km = max(r.rc / 100.0 * r.length / 1000.0, 0.001)
-        for k in LB_INFRACTIONS:
-            infr[k] += len(rec["infractions"][k]) / km
-    infr = {k: round(v, 6) for k, v in infr.items()}
+    infr = _rates(recs)
     scores = {"score_route": 0.0, "score_penalty": 0.0, "score_composed": 0.0}
     std: dict[str, Any] = {k: "NaN" for k in scores}
     if n:
-        cols = {"score_route": [r.rc for r in mine], "score_penalty": [r.is_ for r in mine],
-                "score_composed": [r.ds for r in mine]}
+        cols = {k: [rec["scores"][k] for rec in recs] for k in scores}
         scores = {k: round(float(np.mean(v)), 6) for k, v in cols.items()}
         if n > 1:
             std = {k: round(float(np.std(v, ddof=1)), 6) for k, v in cols.items()}
     exceptions = [[rec["route_id"], rec["index"], rec["status"]] for rec in recs
                   if rec["status"] != "Completed"]
+    meta: dict[str, Any] = {"exceptions": exceptions} if exceptions else {}
+    meta.update({"total_length": round(sum(rec["meta"]["route_length"] for rec in recs), 6),
+                 "duration_game": round(sum(r.duration for r in mine), 3), "duration_system": -1})
     global_record = {
         "route_id": -1,
         "index": -1,
         "status": "Failed" if exceptions else "Completed",
         "infractions": infr,
         "scores": scores,
-        "meta": {"exceptions": exceptions, "total_length": round(sum(r.length for r in mine), 2),
-                 "duration_game": round(sum(r.duration for r in mine), 3), "duration_system": -1},
+        "meta": meta,
         "scores_std_dev": std,
     }
     values = [f"{scores['score_composed']:.3f}", f"{scores['score_route']:.3f}",
-              f"{scores['score_penalty']:.3f}"] + [
-        f"{infr[k]:.3f}" for k in ("collisions_pedestrian", "collisions_vehicle", "collisions_layout",
-                                   "red_light", "stop_infraction", "outside_route_lanes", "route_dev",
-                                   "route_timeout", "vehicle_blocked")]
-    statuses = [rec["status"] for rec in recs]
-    if "Failed - Simulation crashed" in statuses:
-        entry, eligible = "Crashed", False
-    elif any("Agent" in st for st in statuses):
-        entry, eligible = "Finished with agent errors", True
-    else:
-        entry, eligible = "Finished", True
+              f"{scores['score_penalty']:.3f}"] + [f"{infr[k]:.3f}" for k in LB_INFRACTIONS]
+    entry, eligible = _entry_status([rec["status"] for rec in recs])
     return {
         "_checkpoint": {"global_record": global_record, "progress": [n, n], "records": recs},
         "entry_status": entry,
@@ -198,8 +235,9 @@ class Leaderboard1(Scoring):
         """The route timeout: ``int(0.8 s/m x route length + 5 s)``."""
         return route_timeout(route_length)
 
-    def leaderboard_file(self, records: Iterable[EpisodeRecord], agent: str, family: str) -> dict:
-        return leaderboard_checkpoint(records, agent, family)
+    def leaderboard_file(self, records: Iterable[EpisodeRecord], agent: str, family: str,
+                         key_points: KeyPoints | None = None) -> dict:
+        return leaderboard_checkpoint(records, agent, family, key_points)
 
 
 #: the Leaderboard 1.0 rule set (registered as ``lb1`` by :mod:`icrsumo.scoring`)

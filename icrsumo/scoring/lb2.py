@@ -20,7 +20,7 @@ from collections.abc import Iterable, Sequence
 from icrsumo.core.types import EpisodeLog, EpisodeRecord, Event, Infraction
 from icrsumo.core.vocab import EventKind
 
-from .base import Scoring
+from .base import KeyPoints, Scoring
 from .criteria import (
     EPS,
     MIN_TIMEOUT_LB2,
@@ -220,7 +220,9 @@ class Leaderboard2(Scoring):
                                       f"checkpoint {i + 1}: {value:.2f}%"))
         return out
 
-    def leaderboard_file(self, records: Iterable[EpisodeRecord], agent: str, family: str) -> dict:
+    def leaderboard_file(self, records: Iterable[EpisodeRecord], agent: str, family: str,
+                         key_points: KeyPoints | None = None) -> dict:
+        """2.0's file (its route length is the interpolated route's: ``key_points`` is not used)."""
         return leaderboard_checkpoint_lb2(records, agent, family)
 
 

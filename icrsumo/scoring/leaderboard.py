@@ -53,11 +53,19 @@ def route_name(r: EpisodeRecord) -> str:
     return f"RouteScenario_{r.route_id}_{r.family}_{r.k}"
 
 
+#: how a crashed episode's message begins when the simulation failed, not the agent: SUMO
+#: failed to start (libsumo raised), or the worker process running the episode died
+SIMULATION_FAILURES = ("SimulatorError:", "WorkerDied:")
+
+
 def route_status(r: EpisodeRecord) -> tuple[str, str | None, str]:
-    """A record's leaderboard status, the infraction key its termination adds and that entry."""
+    """A record's leaderboard status, the infraction key its termination adds and that entry.
+    A crashed episode is the simulation's crash when its message names one of
+    :data:`SIMULATION_FAILURES`, else the agent's (its code raised, it timed out or broke the
+    protocol: what the leaderboard reports as 'Agent crashed')."""
     if r.status == EpisodeStatus.CRASHED:
-        return ("Failed - Agent crashed" if "agent" in r.message.lower() else "Failed - Simulation crashed",
-                None, "")
+        sim = r.message.startswith(SIMULATION_FAILURES)
+        return ("Failed - Simulation crashed" if sim else "Failed - Agent crashed", None, "")
     return TERMINATION_STATUS.get(r.termination, (f"Failed - {r.termination}", None, ""))
 
 

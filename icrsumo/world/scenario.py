@@ -68,8 +68,9 @@ class Scenario:
     the junctions it crosses and the lane changes it needs; ``route.headings`` is empty in
     scenarios written before icrsumo recorded it); ``traffic``: the background traffic;
     ``step_length``: the simulation step (s); ``source_hash``: the hash of the inputs it was
-    converted from ("" when absent). ``manifest`` is the raw ``scenario.json``, for copying it
-    whole; read the records instead of its keys.
+    converted from ("" when absent). ``key_points``: the route file's waypoints (m, SUMO's
+    frame; their heights are not kept), () in manifests written without them. ``manifest`` is
+    the raw ``scenario.json``, for copying it whole; read the records instead of its keys.
     """
 
     route_id: str
@@ -85,6 +86,7 @@ class Scenario:
     weather: dict
     source_hash: str
     manifest: dict
+    key_points: tuple[tuple[float, float], ...] = ()
 
     @property
     def ego_edges(self) -> tuple[str, ...]:
@@ -180,21 +182,27 @@ def _lanes(c: DocChecker, ego: dict) -> tuple[tuple[str, ...], tuple[tuple[int, 
     return names, out[0], out[1]
 
 
+def _xy_points(c: DocChecker, v: Any, place: str) -> tuple[tuple[float, float], ...]:
+    """The list of [x, y] points (m) at ``place``, at least two."""
+    points = []
+    for i, p in enumerate(c.lst(v, place, 2)):
+        pt = c.lst(p, f"{place}[{i}]")
+        if len(pt) != 2:
+            raise c.fail(f"{place}[{i}]", f"must be [x, y], not {len(pt)} numbers")
+        points.append(tuple(c.number(x, f"{place}[{i}][{k}]") for k, x in enumerate(pt)))
+    return tuple(points)
+
+
 def _polyline(c: DocChecker, route: dict) -> tuple[tuple[tuple[float, float], ...], tuple[float, ...]]:
     """The route's centre line and the lane heading at each of its points (() when absent)."""
-    poly = c.lst(c.key(route, "polyline", "route"), "route.polyline", 2)
-    points = []
-    for i, p in enumerate(poly):
-        pt = c.lst(p, f"route.polyline[{i}]")
-        if len(pt) != 2:
-            raise c.fail(f"route.polyline[{i}]", f"must be [x, y], not {len(pt)} numbers")
-        points.append(tuple(c.number(x, f"route.polyline[{i}][{k}]") for k, x in enumerate(pt)))
+    poly = c.key(route, "polyline", "route")
+    points = _xy_points(c, poly, "route.polyline")
     if "headings" not in route:
-        return tuple(points), ()
+        return points, ()
     heads = c.lst(route["headings"], "route.headings")
     if len(heads) != len(poly):
         raise c.fail("route.headings", f"has {len(heads)} entries for {len(poly)} polyline points")
-    return tuple(points), tuple(c.number(h, f"route.headings[{i}]") for i, h in enumerate(heads))
+    return points, tuple(c.number(h, f"route.headings[{i}]") for i, h in enumerate(heads))
 
 
 def _lane_indices(c: DocChecker, d: dict, place: str) -> tuple[int, int]:
@@ -390,6 +398,7 @@ def read_scenario(path: Path) -> Scenario:
     ego = c.obj(c.key(m, "ego"), "ego")
     vehicle, route, traffic = _ego(c, ego), _route(c, m, ego), _traffic(c, m)
     source_hash = c.string(m["source_hash"], "source_hash") if "source_hash" in m else ""
+    key_points = _xy_points(c, m["waypoints"], "waypoints") if "waypoints" in m else ()
     base = mpath.parent
     net = _rel_file(c, base, c.key(m, "net"), "net", "network")
     check_xml_file(net, "network file", _FIX)
@@ -397,7 +406,7 @@ def read_scenario(path: Path) -> Scenario:
     _check_sumocfg(sumocfg, sumocfg, net, step_length)
     return Scenario(route_id=route_id, town=town, dir=base, net=net, sumocfg=sumocfg, seed=seed,
                     step_length=step_length, ego=vehicle, route=route, traffic=traffic, weather=weather,
-                    source_hash=source_hash, manifest=m)
+                    source_hash=source_hash, manifest=m, key_points=key_points)
 
 
 def check_against_net(sc: Scenario, net) -> None:

@@ -181,6 +181,23 @@ def test_stored_episodes_agree_with_the_leaderboard_transcription(reference):
             assert got["ended"] in (str(r.termination), None)
 
 
+def test_results_files_agree_with_the_leaderboard_transcription(reference):
+    """tools/check_lb1.py: the stored episodes, and every leaderboard/<agent>_<family>.json
+    against the file tests/lb1_reference.py builds from the same records and the routes' key
+    points (their lengths, not the lanes')."""
+    ref_out, _ = reference
+    tool = Path(__file__).parents[2] / "tools" / "check_lb1.py"
+    proc = subprocess.run([sys.executable, str(tool), str(ref_out)], capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert "6 results files (16 routes with key points); 0 differ" in proc.stdout
+    cp = json.loads((ref_out / "leaderboard" / "instruction-follower_noise.json").read_text())
+    lengths = {r["route_id"]: r["meta"]["route_length"] for r in cp["_checkpoint"]["records"]}
+    with ResultStore(ref_out / "results.sqlite") as store:
+        lanes = {f"RouteScenario_{r.route_id}_noise_{r.k}": r.length for r in store.records()}
+    assert all(0 < lengths[k] < lanes[k] for k in lengths)  # straight lines between waypoints
+
+
 def test_another_scoring_is_another_configuration(reference, capsys):
     ref_out, _ = reference
     raw = (ref_out / "config.json").read_bytes()

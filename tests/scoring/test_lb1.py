@@ -9,6 +9,9 @@ OutsideRouteLanesTest).
 from __future__ import annotations
 
 import json
+import math
+import random
+from dataclasses import replace
 
 import pytest
 from hand_logs import ROUTE, contact, make_log, straight  # tests/ is on pytest's pythonpath
@@ -116,8 +119,9 @@ def test_leaderboard_checkpoint():
                                       ("outside_route_lanes", 0.3 / 0.42)))]
     cp = leaderboard_checkpoint(recs, "B", "misleading")
     assert set(cp) == {"_checkpoint", "entry_status", "eligible", "sensors", "values", "labels"}
-    # r1 k1 crashed in the simulator: the leaderboard stops there with 'Crashed', not eligible
-    assert cp["entry_status"] == "Crashed" and cp["eligible"] is False and cp["sensors"] == []
+    # r1 k1 crashed ("boom": the agent's code raised): 'Agent crashed', still eligible
+    assert cp["entry_status"] == "Finished with agent errors" and cp["eligible"] is True
+    assert cp["sensors"] == []
     c = cp["_checkpoint"]
     assert set(c) == {"global_record", "progress", "records"}
     assert c["progress"] == [7, 7] and len(c["records"]) == 7
@@ -134,7 +138,10 @@ def test_leaderboard_checkpoint():
     r1 = recs_by_id["RouteScenario_r1_misleading_0"]
     assert r1["status"] == "Failed - Agent deviated from the route"
     assert r1["infractions"]["route_dev"] == ["Agent deviated from the route"]
-    assert recs_by_id["RouteScenario_r1_misleading_1"]["status"] == "Failed - Simulation crashed"
+    assert recs_by_id["RouteScenario_r1_misleading_1"]["status"] == "Failed - Agent crashed"
+    # no log: what the leaderboard writes for a route whose criteria recorded nothing
+    assert recs_by_id["RouteScenario_r1_misleading_1"]["scores"] == {
+        "score_route": 0.0, "score_penalty": 1.0, "score_composed": 0.0}
     assert recs_by_id["RouteScenario_r2_misleading_1"]["status"] == "Failed - Agent timed out"
     assert recs_by_id["RouteScenario_r2_misleading_1"]["infractions"]["route_timeout"] == ["Route timeout."]
     assert recs_by_id["RouteScenario_r3_misleading_0"]["status"] == "Completed"
@@ -149,13 +156,14 @@ def test_leaderboard_checkpoint():
     g = c["global_record"]
     assert g["index"] == -1 and g["route_id"] == -1 and g["status"] == "Failed"
     assert set(g) >= {"route_id", "index", "status", "infractions", "scores", "meta"}
-    # means over every route, the crashed one (0) included
+    # means over every route, the crashed one (DS 0, IS 1) included
     assert g["scores"]["score_composed"] == pytest.approx((20 + 0 + 10 + 50 + 90 + 45 + 30) / 7)
-    # rates: sum over routes of count / max(RC / 100 x 0.5 km, 0.001): route deviations on r1 k0
+    assert g["scores"]["score_penalty"] == pytest.approx((1 + 1 + 1 + 1 + 0.9 + 0.9 + 0.3) / 7)
+    # rates: sum over routes of count / (RC / 100 x 0.5 km): route deviations on r1 k0
     # (RC 20: 1 / 0.1), r2 k0 (RC 10: 1 / 0.05), r3 k1 (RC 50: 1 / 0.25); r4's collision (RC 100)
     assert g["infractions"]["route_dev"] == pytest.approx(10 + 20 + 4, abs=1e-6)
     assert g["infractions"]["collisions_vehicle"] == pytest.approx(2.0, abs=1e-6)
-    assert ["RouteScenario_r1_misleading_1", 1, "Failed - Simulation crashed"] in g["meta"]["exceptions"]
+    assert ["RouteScenario_r1_misleading_1", 1, "Failed - Agent crashed"] in g["meta"]["exceptions"]
     assert g["meta"]["total_length"] == 3000.0 and g["meta"]["duration_game"] == 360.0  # crashed: 0
     assert g["meta"]["duration_system"] == -1
     assert len(cp["values"]) == len(cp["labels"]) == 12
@@ -163,7 +171,7 @@ def test_leaderboard_checkpoint():
     assert cp["values"][0] == f"{g['scores']['score_composed']:.3f}"
     json.loads(dumps_json(cp))  # serialisable, no NaN
 
-    # without the simulator crash: deviations and timeouts name the agent
+    # without the crash: deviations and timeouts name the agent
     ok = [r for r in recs if r.status == "done"]
     assert leaderboard_checkpoint(ok, "B", "misleading")["entry_status"] == "Finished with agent errors"
     done = [rec("B", "r3", "misleading", 0, 90, 100, 0.9)]
@@ -173,6 +181,56 @@ def test_leaderboard_checkpoint():
                              termination_class="TO", is_=1.0)]
     cb = leaderboard_checkpoint(blocked, "X", "noise")["_checkpoint"]["records"][0]
     assert cb["status"] == "Failed - Agent got blocked" and len(cb["infractions"]["vehicle_blocked"]) == 1
+
+
+def test_a_route_with_rc_0_adds_no_rate():
+    # r1: RC 0 with a collision and a deviation: the final leaderboard-1.0 code skips the route
+    # (the 0.001 km floor it dropped made each 1 / 0.001 = 1,000 per km); r2: RC 50 of 0.5 km,
+    # 1 / 0.25 km = 4 per km each
+    recs = [rec("X", "r1", "noise", 0, 0, 0, 0.6, "RD", infractions=(("collision_vehicle", 0.6),)),
+            rec("X", "r2", "noise", 0, 30, 50, 0.6, "RD", infractions=(("collision_vehicle", 0.6),))]
+    g = leaderboard_checkpoint(recs, "X", "noise")["_checkpoint"]["global_record"]
+    assert g["infractions"]["collisions_vehicle"] == 4.0 and g["infractions"]["route_dev"] == 4.0
+
+
+def test_the_route_length_is_the_key_points():
+    # r1's key points (0, 0) -> (30, 40) -> (30, 100): 50 + 60 = 110 m (its lanes: 500 m); r2's
+    # are not known: its record's 500 m
+    recs = [rec("X", "r1", "noise", 0, 50, 50, 1.0, "RD"), rec("X", "r2", "noise", 0, 100, 100, 1.0)]
+    cp = LB1.leaderboard_file(recs, "X", "noise", key_points={"r1": KEY_POINTS["r1"]})
+    assert [r["meta"]["route_length"] for r in cp["_checkpoint"]["records"]] == [110.0, 500.0]
+    g = cp["_checkpoint"]["global_record"]
+    assert g["meta"]["total_length"] == 610.0
+    assert g["infractions"]["route_dev"] == round(1 / (0.5 * 0.110), 6)
+    # without key points, the records' lengths
+    plain = leaderboard_checkpoint(recs, "X", "noise")["_checkpoint"]["global_record"]
+    assert plain["meta"]["total_length"] == 1000.0 and plain["infractions"]["route_dev"] == 4.0
+
+
+def _crashed(route: str, message: str) -> EpisodeRecord:
+    return replace(rec("X", route, "noise", 0, status="crashed"), message=message)
+
+
+def test_a_crashed_episode_is_the_agents_unless_the_simulation_failed():
+    agent = [rec("X", "r1", "noise", 0, 100, 100, 1.0),
+             _crashed("r2", "ValueError: bad shape at my_policy.py:3"),
+             _crashed("r3", "AgentTimeout: agent did not answer within 5 s")]
+    cp = leaderboard_checkpoint(agent, "X", "noise")
+    assert [r["status"] for r in cp["_checkpoint"]["records"]] == [
+        "Completed", "Failed - Agent crashed", "Failed - Agent crashed"]
+    assert (cp["entry_status"], cp["eligible"]) == ("Finished with agent errors", True)
+    for why in ("SimulatorError: TraCIException: no network at backend.py:64",
+                "WorkerDied: the worker process died (exit code -9)"):
+        cp = leaderboard_checkpoint([*agent, _crashed("r4", why)], "X", "noise")
+        assert cp["_checkpoint"]["records"][-1]["status"] == "Failed - Simulation crashed"
+        assert (cp["entry_status"], cp["eligible"]) == ("Crashed", False)
+
+
+def test_exceptions_are_listed_only_when_a_route_failed():
+    g = leaderboard_checkpoint([rec("X", "r1", "noise", 0, 100, 100, 1.0)], "X", "noise")["_checkpoint"][
+        "global_record"]
+    assert g["status"] == "Completed" and "exceptions" not in g["meta"]
+    assert g["scores_std_dev"] == {"score_route": "NaN", "score_penalty": "NaN", "score_composed": "NaN"}
 
 
 # ------------------------------------------------------------------ against the transcription
@@ -212,3 +270,79 @@ def test_hand_built_logs_agree_with_the_leaderboard_transcription(case):
         "short": make_log(straight(191) + [(95.25, 0.0)] * 1511, ROUTE, speed=[10.0] * 191 + [0.0] * 1511),
     }
     _agree(logs[case])
+
+
+# ------------------------------------------------------------------ the results file, transcribed
+KEY_POINTS = {"r1": [(0.0, 0.0), (30.0, 40.0), (30.0, 100.0)], "r2": [(5.0, 5.0), (5.0, 305.0)]}
+COLLISION = ("collision_vehicle", 0.6)
+
+
+def _sim_error(route: str, k: int, rc: float) -> EpisodeRecord:
+    """SUMO died in the episode: a finished episode ended by sim_error, scored on its log."""
+    return replace(rec("X", route, "noise", k, rc, rc, 1.0, "TO"), termination="sim_error")
+
+
+SETS = {
+    "rc0_with_infractions": [rec("X", "r1", "noise", 0, 0, 0, 0.6, "RD", infractions=(COLLISION,)),
+                             rec("X", "r2", "noise", 0, 42, 70, 0.6, "TO", infractions=(COLLISION,))],
+    "rc100": [rec("X", "r1", "noise", 0, 42, 100, 0.42, infractions=(COLLISION, ("red_light", 0.7))),
+              rec("X", "r1", "noise", 1, 100, 100, 1.0)],
+    "agent_crash": [rec("X", "r1", "noise", 0, 100, 100, 1.0), _crashed("r2", "RuntimeError: boom at a.py:9"),
+                    rec("X", "r3", "noise", 0, 25, 25, 1.0, "RD")],
+    "simulation_crash": [rec("X", "r1", "noise", 0, 100, 100, 1.0), _crashed("r2", "WorkerDied: code -11"),
+                         rec("X", "r3", "noise", 0, 25, 25, 1.0, "RD")],
+    "sim_error_episode": [rec("X", "r1", "noise", 0, 100, 100, 1.0), _sim_error("r2", 0, 35.5)],
+    "several_routes": [rec("X", "r1", "noise", 0, 60, 100, 0.6, infractions=(COLLISION,)),
+                       rec("X", "r1", "noise", 1, 12.5, 25, 0.5, "RD",
+                           infractions=(("collision_pedestrian", 0.5),)),
+                       rec("X", "r2", "noise", 0, 56, 80, 0.7, "TO", infractions=(("red_light", 0.7),)),
+                       rec("X", "r3", "noise", 0, 80, 100, 0.8, infractions=(("stop_sign", 0.8),)),
+                       rec("X", "r3", "noise", 1, 40, 50, 0.8, "RD",
+                           infractions=(("outside_route_lanes", 0.8),)),
+                       replace(rec("X", "r4", "noise", 0, 0, 0, 1.0, "TO"), termination="agent_blocked")],
+}
+
+
+@pytest.mark.parametrize("case", SETS)
+def test_results_file_agrees_with_the_leaderboard_transcription(case):
+    import lb1_reference
+
+    recs = SETS[case]
+    mine = leaderboard_checkpoint(recs, "X", "noise", KEY_POINTS)
+    ref = lb1_reference.leaderboard_file(recs, KEY_POINTS)
+    assert lb1_reference.differences(mine, ref) == []
+    if case == "simulation_crash":
+        # the leaderboard's run ends at r2 with no global record; icrsumo writes every route
+        assert ref["_checkpoint"]["global_record"] == {} and len(ref["_checkpoint"]["records"]) == 2
+        assert len(mine["_checkpoint"]["records"]) == 3 and mine["_checkpoint"]["global_record"]["scores"]
+
+
+def _random_record(rng: random.Random, route: str, k: int) -> EpisodeRecord:
+    """A consistent random record: its termination, RC, counted infractions and IS their product."""
+    end = rng.choice(["completed", "route_deviation", "route_timeout", "agent_blocked", "stuck", "sim_error",
+                      "crash_agent", "crash_sim"])
+    if end.startswith("crash"):
+        return _crashed(route, "SimulatorError: gone" if end == "crash_sim" else "KeyError: 'x' at a.py:1")
+    rc = 100.0 if end == "completed" else rng.choice([0.0, 0.0, round(rng.uniform(0, 99), 4)])
+    kinds = [("collision_pedestrian", 0.5), ("collision_vehicle", 0.6), ("collision_static", 0.65),
+             ("red_light", 0.7), ("stop_sign", 0.8), ("outside_route_lanes", round(rng.uniform(0.1, 1), 6))]
+    infr = tuple(rng.choice(kinds) for _ in range(rng.choice([0, 0, 1, 2, 4])))
+    is_ = math.prod(f for _, f in infr)
+    r = rec("X", route, "noise", k, rc * is_, rc, is_, infractions=infr)
+    return replace(r, termination=end, length=round(rng.uniform(50, 900), 2),
+                   duration=round(rng.uniform(0, 300), 2))
+
+
+def test_random_results_files_agree_with_the_leaderboard_transcription():
+    """500 random sets of 1 to 12 records (some routes with key points), no simulation crash
+    among them or one: icrsumo's file and the transcription's agree."""
+    import lb1_reference
+
+    rng = random.Random(47)
+    for _ in range(500):
+        routes = [f"r{i}" for i in range(rng.randint(1, 6))]
+        recs = [_random_record(rng, rid, k) for rid in routes for k in range(rng.randint(1, 2))]
+        key_points = {rid: [(rng.uniform(0, 500), rng.uniform(0, 500)) for _ in range(rng.randint(2, 5))]
+                      for rid in routes if rng.random() < 0.7}
+        mine = leaderboard_checkpoint(recs, "X", "noise", key_points)
+        assert lb1_reference.differences(mine, lb1_reference.leaderboard_file(recs, key_points)) == []

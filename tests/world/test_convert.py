@@ -66,6 +66,7 @@ def test_scenario_records_are_what_convert_wrote(carla_mini_out):
             (m["ego"]["edges"], m["ego"]["lanes"], m["ego"]["lane_path"])
         assert (asdict(route.start), asdict(route.end)) == (m["ego"]["start"], m["ego"]["end"])
         assert [list(p) for p in route.polyline] == m["route"]["polyline"]
+        assert [list(p) for p in sc.key_points] == m["waypoints"] and len(sc.key_points) >= 2
         assert list(route.headings) == m["route"]["headings"] and route.length == m["route"]["length"]
         assert asdict(sc.ego) == {"vtype": m["ego"]["vtype"], "sumo_route": m["ego"]["route"],
                                   **{k: m["ego"][k] for k in ("depart", "length", "width")}}
