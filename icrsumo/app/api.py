@@ -91,10 +91,11 @@ def evaluate(suite: str | Path = "tiny", agents: str | Sequence[str] | None = No
     a guard blocks leaves the agent: ``"keep"``, what it was shown before, or ``"navigator"``, the
     navigation plan's instruction in the route's baseline words, in rows ``AGENT+guard:NAME+navigator``;
     part of the folder's configuration), ``asking`` (the navigator answers
-    agents' asks for clarification, :mod:`icrsumo.sim.asking`; part of the folder's configuration).
+    agents' asks for clarification, :mod:`icrsumo.sim.asking`; part of the folder's configuration),
+    ``profile`` (the run's wall time split into phases, :mod:`icrsumo.evaluation.profile`; never stored).
 
     Returns an :class:`icrsumo.evaluation.EvalResult`: ``summary`` (OUT/summary.json),
-    ``out``, the episode counts and the batched-inference statistics. Raises
+    ``out``, the episode counts, the batched-inference statistics and, with ``profile``, the profile. Raises
     :class:`icrsumo.core.errors.InputError` for bad input (nothing is written then) and TypeError
     for an unknown option.
     """

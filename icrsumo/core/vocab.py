@@ -1,5 +1,5 @@
 """Every vocabulary of icrsumo, defined once: event kinds, terminations and their classes,
-instruction families, intents, episode statuses and error kinds.
+instruction families, intents, episode statuses, error kinds and the phases of a run's profile.
 
 Members are :class:`enum.StrEnum`: each is its value as a string (``EventKind.RED_LIGHT ==
 "red_light"``, ``str()`` and f-strings give the value, JSON writes the value), so stored files
@@ -183,3 +183,40 @@ class OutcomeStatus(StrEnum):
     DONE = "done"
     CRASHED = "crashed"
     TIMED_OUT = "timed_out"
+
+
+class Phase(StrEnum):
+    """Where an evaluation's worker time goes (``EvalOptions.profile``, ``tools/benchmark.py
+    --protocol``; never stored). Process start: ``worker_start`` (a worker process until its
+    first job), ``episode_setup`` (scenario and instruction files, network, sensors, guard),
+    ``agent_load`` (the agent made, its checkpoint loaded, reset), ``sumo_start`` (SUMO started,
+    traffic warmed up, the ego inserted; SUMO closed). The closed loop, per step: ``sumo_step``
+    (SUMO's step and its collision list), ``sumo_io`` (the ego moved by ``moveToXY``, the
+    frame read), ``control`` (controller, bicycle model), ``observation`` (sensors, route
+    progress, instruction stream, notice, World view), ``bev`` (the raster), ``act`` (the
+    agent's ``act``), ``rules`` (the route criteria that end an episode), ``recording`` (the
+    log's columns). Per episode: ``scoring`` (the log scored), ``logging`` (the log built and
+    written as JSON). Around the jobs: ``storing`` (between two jobs of a worker: the parent
+    stores the episode and sends the next job), ``idle`` (a worker without a job while others
+    finish), ``before`` / ``after`` (the parent alone: checks, suite and plan / outputs),
+    ``other`` (none of these)."""
+
+    WORKER_START = "worker_start"
+    EPISODE_SETUP = "episode_setup"
+    AGENT_LOAD = "agent_load"
+    SUMO_START = "sumo_start"
+    SUMO_STEP = "sumo_step"
+    SUMO_IO = "sumo_io"
+    CONTROL = "control"
+    OBSERVATION = "observation"
+    BEV = "bev"
+    ACT = "act"
+    RULES = "rules"
+    RECORDING = "recording"
+    SCORING = "scoring"
+    LOGGING = "logging"
+    STORING = "storing"
+    IDLE = "idle"
+    BEFORE = "before"
+    AFTER = "after"
+    OTHER = "other"

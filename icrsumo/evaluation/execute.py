@@ -6,6 +6,7 @@ returned (never an exception): done with its record and log, crashed with an
 from __future__ import annotations
 
 import contextlib
+import os
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -16,24 +17,28 @@ from icrsumo.agents.hosting.watch import CallWatch, Unwatched
 from icrsumo.agents.registry import agent_factory
 from icrsumo.core.errors import Interrupted, describe
 from icrsumo.core.types import EpisodeLog, EpisodeRecord, EpisodeResult, InstructionSet
-from icrsumo.core.vocab import EpisodeStatus, ErrorKind, OutcomeStatus, Verdict
+from icrsumo.core.vocab import EpisodeStatus, ErrorKind, OutcomeStatus, Phase, Verdict
 from icrsumo.guards.base import split_policy, split_row
+from icrsumo.sim.callbacks import PhaseClock
 from icrsumo.world.scenario import Scenario
 
 from .plan import Job
+from .profile import JobTiming
 
 
 @dataclass(frozen=True)
 class Outcome:
     """What running one job gave. ``status`` done: ``record`` (attempts 1) and ``log_json``;
     crashed or timed_out: ``error_kind`` and ``message`` (one line, e.g.
-    ``RuntimeError: agent exploded at my_agent.py:35``)."""
+    ``RuntimeError: agent exploded at my_agent.py:35``). ``timing``: the job's phases when
+    its job asked for a profile (``Job.profile``; never stored)."""
 
     status: OutcomeStatus
     record: EpisodeRecord | None = None
     log_json: str = ""
     error_kind: ErrorKind | None = None
     message: str = ""
+    timing: JobTiming | None = None
 
     @classmethod
     def finished(cls, record: EpisodeRecord, log_json: str) -> Outcome:
@@ -159,24 +164,44 @@ class EpisodeWorker:
         return WatchedGuard(factory(), self.watch, row_guard(job))
 
     def run(self, job: Job) -> Outcome:
-        """Run one episode and score it; every failure becomes an Outcome."""
+        """Run one episode and score it; every failure becomes an Outcome. With
+        ``job.profile`` the outcome carries the job's :class:`JobTiming`."""
+        if not job.profile:
+            return self._run(job, None)
+        clock = PhaseClock()
+        outcome = self._run(job, clock)
+        clock.lap(Phase.LOGGING)
+        rec = outcome.record
+        return replace(outcome, timing=JobTiming(
+            dict(clock.phases), clock.start, clock.last, os.getpid(), clock.steps,
+            rec.duration if rec is not None else 0.0, job.scenario))
+
+    def _run(self, job: Job, clock: PhaseClock | None) -> Outcome:
         from icrsumo.results.logs import ask_counts, dumps_log, loads_log
         from icrsumo.scoring import score_episode
         from icrsumo.sim.episode import RunOptions, run_episode
 
+        lap = clock.lap if clock is not None else _no_lap
         try:
             factory = self.factory(job)
+            lap(Phase.AGENT_LOAD)
             sc, iset, baseline = self._inputs(job)
             guard = self.guard(job)
+            lap(Phase.EPISODE_SETUP)
             agent = WatchedAgent(factory(), self.watch)
+            lap(Phase.AGENT_LOAD)
             try:
                 log = run_episode(sc, iset, agent, RunOptions(scoring=job.scoring, asking=job.asking,
                                                               on_block=job.on_block),
-                                  guard=guard, baseline=baseline)
+                                  guard=guard, baseline=baseline, clock=clock)
             finally:
                 agent.close()  # the optional close() hook: e.g. a remote agent ends its session
             text = dumps_log(log)
+            lap(Phase.LOGGING)
+            if clock is not None:
+                clock.steps = len(log.t)
             r = score_episode(loads_log(text), job.scoring)  # the stored log: a rescore gives the same
+            lap(Phase.SCORING)
             asks, answered = ask_counts(log)
             rec = with_scores(EpisodeRecord(
                 agent=job.agent, route_id=job.route_id, family=job.family, k=job.k, seed=job.seed,
@@ -200,6 +225,10 @@ class EpisodeWorker:
                 with contextlib.suppress(Exception):
                     factory.close()
         self.factories.clear()
+
+
+def _no_lap(phase: str) -> None:
+    """A lap of no clock (a job without a profile)."""
 
 
 def guard_counts(log: EpisodeLog, iset: InstructionSet) -> dict[str, int]:

@@ -73,6 +73,9 @@ class EvalOptions:
     #: in rows ``AGENT+guard:NAME+navigator`` (:mod:`icrsumo.guards.stream`); part of the out
     #: folder's configuration
     on_block: str = "keep"
+    #: time the run's phases (``EvalResult.profile``, :mod:`icrsumo.evaluation.profile`: for
+    #: ``tools/benchmark.py --protocol``); never stored, the results are the same
+    profile: bool = False
 
     def check(self) -> None:
         """InputErrors for bad values (agent specs are checked when they are resolved); first
@@ -133,7 +136,7 @@ class EvalOptions:
             if isinstance(v, bool) or not isinstance(v, int):
                 raise InputError(Field(name), repr(v)[:40], f"must be an integer, not {type(v).__name__}",
                                  "give a whole number")
-        for name in ("quiet", "retry_crashed", "asking"):
+        for name in ("quiet", "retry_crashed", "asking", "profile"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(Field(name), repr(getattr(self, name))[:40], "must be True or False",
                                  "give a bool")

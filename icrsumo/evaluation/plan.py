@@ -56,6 +56,8 @@ class Job:
     asking: bool = False
     #: what an instruction the guard blocks leaves the agent (:data:`icrsumo.guards.base.BLOCK_POLICIES`)
     on_block: str = "keep"
+    #: the worker times the job's phases (``EvalOptions.profile``; the episode is the same)
+    profile: bool = field(default=False, compare=False)
 
     @property
     def key(self) -> tuple[str, str, str, int, int]:
@@ -329,5 +331,6 @@ def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mappin
                         continue
                     jobs.append(Job(spec, name, sc.route_id, fam, k, opts.seed, str(d), instr,
                                     device=opts.agent_device, scoring=opts.scoring, guard=guard,
-                                    asking=opts.asking, on_block=opts.on_block if guard else "keep"))
+                                    asking=opts.asking, on_block=opts.on_block if guard else "keep",
+                                    profile=opts.profile))
     return jobs

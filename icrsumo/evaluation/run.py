@@ -32,6 +32,7 @@ from .inference import route_jobs, start_inference, stop_inference
 from .options import EvalOptions
 from .outputs import write_outputs
 from .plan import Job, no_routes, plan_jobs, prepare_suite, read_config, skip_reason
+from .profile import ProfileSink, RunProfile
 from .progress import Progress
 
 #: attempts an episode gets at most
@@ -52,8 +53,9 @@ class EvalResult:
     folder; ``episodes``: episodes of the plan, ``ran``: those run now (the others were stored
     already), ``done`` / ``crashed``: the plan's stored episodes by status; ``inference``: agent
     name -> statistics of its batched inference processes (``batch_inference`` only: resets,
-    acts, batches, largest_batch, processes, and the seconds wait_s, io_s, run_s); ``digest``:
-    the summary's digest."""
+    acts, batches, largest_batch, processes, and the seconds wait_s, io_s, run_s); ``profile``:
+    where the run's wall time went (``opts.profile`` only, :mod:`icrsumo.evaluation.profile`;
+    never stored); ``digest``: the summary's digest."""
 
     stats: Summary = field(repr=False)
     out: Path
@@ -62,6 +64,7 @@ class EvalResult:
     done: int
     crashed: int
     inference: Mapping[str, dict] = field(default_factory=dict)
+    profile: RunProfile | None = None
 
     @property
     def summary(self) -> dict:
@@ -260,17 +263,19 @@ def run_evaluation(opts: EvalOptions) -> EvalResult:
     """Run (or resume) an evaluation and write its reports. Everything is checked before anything
     is written (options, agents, the out folder's configuration and store, the suite); the run
     owns the out folder while it runs (:class:`icrsumo.core.fsio.FolderLock`)."""
+    sink = ProfileSink(opts.workers) if opts.profile is True else None
     opts.check()
     factories = resolve_agents(opts.agents)
     guards = resolve_guards(opts.guards)
     ids = identify_agents(factories, opts.replace_agents, guards, opts.on_block)
     opts = replace(opts, agents=ids.specs)
     with FolderLock(Path(opts.out)):
-        return _run_locked(opts, factories, guards, ids)
+        result = _run_locked(opts, factories, guards, ids, sink)
+    return result if sink is None else replace(result, profile=sink.finish())
 
 
 def _run_locked(opts: EvalOptions, factories: dict[str, Callable], guards: dict[str, Callable],
-                ids: AgentIds) -> EvalResult:
+                ids: AgentIds, sink: ProfileSink | None = None) -> EvalResult:
     names = ids.names
     out = Path(opts.out)
     check_agents(out / "results.sqlite", ids, opts.replace_agents)
@@ -292,7 +297,7 @@ def _run_locked(opts: EvalOptions, factories: dict[str, Callable], guards: dict[
         with Progress(len(todo), opts.quiet) as progress:
             servers = start_inference(opts, todo, factories)
             try:
-                run_queue(route_jobs(todo, servers), opts, store, progress)
+                run_queue(route_jobs(todo, servers), opts, store, progress, sink)
             finally:
                 progress.close()
                 stats = stop_inference(opts, servers)
@@ -334,14 +339,19 @@ def check_still_there(store: ResultStore) -> None:
                          "run again into a folder that stays")
 
 
-def run_queue(queue: list[Job], opts: EvalOptions, store: ResultStore, progress: Progress) -> None:
+def run_queue(queue: list[Job], opts: EvalOptions, store: ResultStore, progress: Progress,
+              sink: ProfileSink | None = None) -> None:
     """Run ``queue`` on the backend, storing each episode at once; an episode that crashed
     (:data:`RETRIED` kinds) is run again once, then stored as crashed; a timed-out one is stored
-    at once."""
+    at once. ``sink`` collects the jobs' timings (``opts.profile``)."""
     attempts: dict[tuple, int] = {}
     while queue:
         retry = []
+        if sink is not None:
+            sink.round_start()
         for job, outcome in run_jobs(queue, opts):
+            if sink is not None:
+                sink.add(outcome.timing)
             check_still_there(store)
             n = attempts[job.key] = attempts.get(job.key, 0) + 1
             if outcome.status is OutcomeStatus.DONE:
@@ -354,6 +364,8 @@ def run_queue(queue: list[Job], opts: EvalOptions, store: ResultStore, progress:
                                         status=EpisodeStatus.CRASHED, attempts=n,
                                         message=outcome.message[:MAX_MESSAGE]))
                 progress.tick()
+        if sink is not None:
+            sink.round_end()
         queue = retry
 
 

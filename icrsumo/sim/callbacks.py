@@ -4,7 +4,8 @@ The loop calls every attached callback at fixed points; a callback overrides the
 needs (the base class's do nothing). Built in: :class:`LogRecorder` (the episode log's columns
 and events; every episode has one), :class:`LoopTimer` (wall-clock split into
 :class:`LoopTimings`, for ``tools/benchmark.py``) and :class:`VideoRecorder` (the agent's view
-with its instruction as a video).
+with its instruction as a video). Not a callback: :class:`PhaseClock`, the loop's wall time
+split into phases when one is given to it (``tools/benchmark.py --protocol``).
 """
 
 from __future__ import annotations
@@ -150,6 +151,28 @@ class LoopTimer(EpisodeCallback):
         if self._ready:
             self.timings.loop_s += time.perf_counter() - self._ready
         self.timings.steps += episode.recorder.steps
+
+
+class PhaseClock:
+    """Wall time split into phases (s, ``time.perf_counter``): :meth:`lap` gives the time
+    since the previous lap (the first: since the clock was made, ``start``) to one phase
+    (:class:`~icrsumo.core.vocab.Phase`), so ``phases`` add up to ``last - start``. The loop
+    laps only when it is given one (``run_episode(..., clock=)``, for ``EvalOptions.profile``);
+    its episodes are the same with or without. ``steps``: the episode's steps, set by the
+    caller."""
+
+    __slots__ = ("phases", "start", "last", "steps")
+
+    def __init__(self) -> None:
+        self.phases: dict[str, float] = {}
+        self.start = self.last = time.perf_counter()
+        self.steps = 0
+
+    def lap(self, phase: str) -> None:
+        """The time since the last lap goes to ``phase``."""
+        now = time.perf_counter()
+        self.phases[phase] = self.phases.get(phase, 0.0) + (now - self.last)
+        self.last = now
 
 
 class VideoRecorder(EpisodeCallback):

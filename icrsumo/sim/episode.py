@@ -29,7 +29,7 @@ from pathlib import Path
 from icrsumo.agents.base import Action, Agent, EpisodeInfo, Observation, World, validate_action
 from icrsumo.core.errors import Field, InputError
 from icrsumo.core.types import EgoRoute, EpisodeLog, Event, InstructionSet
-from icrsumo.core.vocab import EventKind, Family, Termination
+from icrsumo.core.vocab import EventKind, Family, Phase, Termination
 from icrsumo.guards.base import Guard, guarded_name
 from icrsumo.guards.stream import GuardedStream
 from icrsumo.instructions.maneuvers import extract_maneuvers
@@ -43,7 +43,7 @@ from icrsumo.world.scenario import Scenario
 
 from .asking import ASK_DELAY, Navigator
 from .backend import SimulatorError, SumoBackend
-from .callbacks import EpisodeCallback, LogRecorder, StepRecord
+from .callbacks import EpisodeCallback, LogRecorder, PhaseClock, StepRecord
 from .control import WaypointController, WaypointPath
 from .drivable import drivable_area
 from .frame import SimFrame
@@ -100,14 +100,17 @@ class Episode:
     ``needs_route``: that view includes the route (the route-oracle only). With
     ``options.asking``, ``baseline`` (the route's baseline sequence; ``instructions`` itself when
     it is the baseline) words the navigator's answers, and with a ``guard`` under
-    ``options.on_block`` navigator, the repairs of blocked instructions.
+    ``options.on_block`` navigator, the repairs of blocked instructions. ``clock``: a
+    :class:`PhaseClock` the loop laps (None: no timing).
     """
 
     def __init__(self, scenario: Scenario, instructions: InstructionSet,
                  options: RunOptions = RunOptions(), *, privileged: bool = False,  # noqa: B008
                  needs_route: bool = False, callbacks: Sequence[EpisodeCallback] = (),
-                 guard: Guard | None = None, baseline: InstructionSet | None = None) -> None:
+                 guard: Guard | None = None, baseline: InstructionSet | None = None,
+                 clock: PhaseClock | None = None) -> None:
         self.scenario, self.instructions = scenario, instructions
+        self.clock = clock
         self.options, self.privileged, self.needs_route = options, privileged, needs_route
         self.net = net = load_net(scenario.net)
         self.params = params = VehicleParams(length=scenario.ego.length, width=scenario.ego.width)
@@ -223,6 +226,8 @@ class Episode:
             self.monitor = TerminationMonitor(self.route, round(backend.time, 3), self.rules)
             for cb in self.callbacks:
                 cb.on_ready(self)
+            if self.clock is not None:
+                self.clock.lap(Phase.SUMO_START)
             return self._advance()
         except SimulatorError as err:
             self._sim_error(err)
@@ -253,8 +258,15 @@ class Episode:
             self._path, self.state.speed, dt, action.target_speed)
         state = self.state = step(self.state, control, dt, params)
         fx, fy = state.front(params.length)
+        clock = self.clock
+        if clock is not None:
+            clock.lap(Phase.CONTROL)
         self.backend.place_ego(fx, fy, state.yaw)
+        if clock is not None:
+            clock.lap(Phase.SUMO_IO)
         self.backend.step()
+        if clock is not None:
+            clock.lap(Phase.SUMO_STEP)
         self.i += 1
 
     def _advance(self) -> Observation | None:
@@ -274,6 +286,9 @@ class Episode:
     def _record_step(self, observe: bool) -> bool:
         """Read SUMO's frame, detect events, record the step; True when the episode ended."""
         frame = self.frame = self.backend.read(surroundings=observe, lights=self._lights)
+        clock = self.clock
+        if clock is not None:
+            clock.lap(Phase.SUMO_IO)
         state, t = self.state, frame.t
         if not frame.ego_present:  # SUMO teleported or removed the ego
             self.recorder.events.append(Event(EventKind.EGO_TELEPORT, t, self.progress, "", state.x, state.y))
@@ -293,10 +308,16 @@ class Episode:
         rec = StepRecord(t, state.x, state.y, state.yaw, state.speed, progress,
                          self.instr[k].id if k >= 0 else -1, ss.outside, mon.route_dist, tuple(events),
                          frame.traffic_speed, ss.speed_limit)
+        if clock is not None:
+            clock.lap(Phase.OBSERVATION)
         for cb in self.callbacks:
             cb.on_step(self, rec)
+        if clock is not None:
+            clock.lap(Phase.RECORDING)
         done = mon.update(t, speed, ss.outside, events, round(frame.traffic_speed, 3) + 0.0,
                           round(ss.speed_limit, 2) + 0.0)
+        if clock is not None:
+            clock.lap(Phase.RULES)
         if done:
             self._finish(Termination(done), t)
             return True
@@ -318,13 +339,17 @@ class Episode:
         for n in self.notices:
             if n.trigger <= progress < n.end:
                 notice = n.text
-        callbacks = self.callbacks
+        callbacks, clock = self.callbacks, self.clock
+        if clock is not None:
+            clock.lap(Phase.OBSERVATION)
         for cb in callbacks:
             cb.on_render_start(self)
         bev = self.renderer.render((state.x, state.y, state.yaw), (params.length, params.width),
                                    frame.vehicles, frame.pedestrians, frame.tl_states)
         for cb in callbacks:
             cb.on_render_end(self)
+        if clock is not None:
+            clock.lap(Phase.BEV)
         world = None
         if self.privileged:
             world = World(net=self.net, ego=state, lane=frame.lane, lane_pos=frame.lane_pos,
@@ -339,6 +364,8 @@ class Episode:
                           notice=notice, world=world, answer=answer is not None)
         for cb in callbacks:
             cb.on_observation(self, obs)
+        if clock is not None:
+            clock.lap(Phase.OBSERVATION)
         return obs
 
     # ------------------------------------------------------------------ results
@@ -383,7 +410,7 @@ def _navigator(scenario: Scenario, net: RoadNet, instructions: InstructionSet,
 def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
                 options: RunOptions = RunOptions(),  # noqa: B008
                 callbacks: Sequence[EpisodeCallback] = (), guard: Guard | None = None,
-                baseline: InstructionSet | None = None) -> EpisodeLog:
+                baseline: InstructionSet | None = None, clock: PhaseClock | None = None) -> EpisodeLog:
     """Drive one episode with ``agent`` and return its log (:class:`icrsumo.core.types.EpisodeLog`).
 
     The agent is reset with the episode's :class:`EpisodeInfo`, then acts on every observation;
@@ -395,11 +422,17 @@ def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
     sees it; its decisions are the log's ``guard`` and the log is named ``AGENT+guard:NAME``
     (``AGENT+guard:NAME+navigator`` under ``options.on_block`` navigator).
     With ``options.asking`` the navigator answers the agent's asks in the words of ``baseline``
-    (the route's baseline sequence); they are the log's ``asks``."""
+    (the route's baseline sequence); they are the log's ``asks``. With a ``clock``
+    (:class:`~icrsumo.sim.callbacks.PhaseClock`) the episode's wall time is split into its
+    phases (:class:`~icrsumo.core.vocab.Phase`); the log is the same."""
     with Episode(scenario, instructions, options, privileged=bool(getattr(agent, "privileged", False)),
                  needs_route=bool(getattr(agent, "needs_route", False)), callbacks=callbacks,
-                 guard=guard, baseline=baseline) as ep:
+                 guard=guard, baseline=baseline, clock=clock) as ep:
+        if clock is not None:
+            clock.lap(Phase.EPISODE_SETUP)
         agent.reset(ep.info)
+        if clock is not None:
+            clock.lap(Phase.AGENT_LOAD)
         obs = ep.start()
         hooks = ep.callbacks[1:]  # the recorder needs no act hooks
         while obs is not None:
@@ -408,7 +441,11 @@ def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
             action = agent.act(obs)
             for cb in hooks:
                 cb.on_act_end(ep, action)
+            if clock is not None:
+                clock.lap(Phase.ACT)
             obs = ep.step(action)
+    if clock is not None:
+        clock.lap(Phase.SUMO_START)  # SUMO closed
     name = getattr(agent, "name", type(agent).__name__)
     log = ep.log(name if ep.guarded is None else guarded_name(name, ep.guarded.name, ep.guarded.on_block))
     calls = getattr(agent, "episode_calls", None)  # an agent that asks a language model
