@@ -24,6 +24,8 @@ _TOKEN_RE = re.compile(
 _ORDINAL_RE = re.compile(r"(\d+)(?:st|nd|rd|th)")
 _ORDINAL_NAMES = {v: k for k, v in lex.ORDINALS.items()}
 _REPEAT_RE = re.compile(r"([a-z])\1{2,}")
+#: the distinct letters of each correction target
+_LETTERS = {kw: frozenset(kw) for kw in lex.FUZZY_TARGETS}
 
 
 
@@ -75,10 +77,14 @@ def _fuzzy(word: str) -> str | None:
     """The closest keyword within its edit budget, or None ("pight" -> light, "rigjt" -> right)."""
     best, best_key = None, (99, True, True)
     n = len(word)
+    letters = frozenset(word)
     for kw in lex.FUZZY_TARGETS:
         limit = min(_budget(len(kw)), _budget(n + 1))
         if abs(len(kw) - n) > limit:
             continue
+        kw_letters = _LETTERS[kw]
+        if len(kw_letters - letters) > limit or len(letters - kw_letters) > limit:
+            continue  # each edit adds or removes at most one distinct letter: too far, cheaply
         d = _osa(word, kw, limit)
         if d <= limit:
             # ties: a keyboard-neighbour slip, then the same first letter, then list order
@@ -207,4 +213,12 @@ def tokens(text: str) -> tuple[str, ...]:
         t if t == r and (t in lex.NO_SLOT_FIX or not t.isalpha()) else _fix_slot(out, i, r)
         for i, (t, r) in enumerate(pairs)
     ]
-    return tuple(_join_round_about(fixed))
+    return tuple(_join_round_about(_slow_down(fixed)))
+
+
+def _slow_down(out: list[str]) -> list[str]:
+    """An unknown word one edit from "slow" before "down" is "slow" ("slwo down")."""
+    if "down" not in out:
+        return out
+    return ["slow" if k + 1 < len(out) and out[k + 1] == "down" and t not in lex.KNOWN and t.isalpha()
+            and _osa(t, "slow", 1) <= 1 else t for k, t in enumerate(out)]

@@ -208,7 +208,7 @@ PARAPHRASES = (
     + _cases(
         U,
         "Make a U-turn.", "Turn around.", "Turn left or right.", "Turn either left or right.",
-        "Go left or go right, your choice.", "Turn somewhere.", "Hmm.", "", "Take it easy.",
+        "Go left or go right, your choice.", "Turn somewhere.", "Hmm.", "",
         "Drive safely.", "You have arrived at your destination.",
         "Your destination is on the right.", "The gas station is on your right.",
         "You have arrived at your destination, on the right.", "Exit the roundabout onto Queen Street.",
@@ -318,12 +318,16 @@ FALSE_FRIENDS = (
         U,
         "The lift is broken.", "It might rain tonight.",
         "The plane landed late.",
-        "Step on it.", "Edit the route.", "The right of way belongs to pedestrians.", "That's right.",
+        "Edit the route.", "The right of way belongs to pedestrians.", "That's right.",
         "The tour bus felt tight.", "A fellow in a hollow let the shop lights burn.", "Eight bright lights.",
         "Loft, lift, lent, lest.", "turn eight", "turn tight", "turn fight",
-        "The line at the shop was long.", "Let the bus go first.", "The torn sign on top of the stock.",
+        "The line at the shop was long.", "The torn sign on top of the stock.",
         "I felt the sight was bright.",
     )
+    # idioms read as commands since issue 45 (speeding up is FOLLOW; slowing down and letting
+    # someone by are STOP), and still no turn: "step" is no "stop", "let" no "left"
+    + _cases(F, "Step on it.")
+    + _cases(ST, "Let the bus go first.", "Take it easy.")
     + _cases(S, "Go straight through the traffic light.", "Keep going straight at the lights tonight.")
     + _cases(L, "Turn left at the light.", "Turn left at the lights tonight.",
     "Left at the eight-way junction.")
