@@ -34,7 +34,8 @@ GUARDS.register("text", "icrsumo.guards.text:TextGuard",
 GUARDS.register("plan", "icrsumo.guards.plan:PlanGuard",
                 description="checks the instruction's intent against the navigation plan")
 GUARDS.register("text-learned", "icrsumo.learn.text_guard:LearnedTextGuard",
-                description="from the text alone: a linear classifier over hashed character n-grams")
+                description="from the text alone: a linear classifier over hashed character n-grams "
+                            "and word pairs")
 register_plugins(GUARDS, GUARD_ENTRY_POINTS)
 
 

@@ -1,17 +1,19 @@
 """The ``text-learned`` guard: a linear classifier "misleading or not" over the hashed character
-n-gram features of the ``ngram`` language encoder (:mod:`icrsumo.learn.text`), decided from the
-text alone.
+n-gram and word features of the ``ngram`` language encoder (:mod:`icrsumo.learn.text`) and the
+text's hashed word pairs, decided from the text alone.
 
 Its weights ship as ``data/text_guard.npz`` (plain arrays, read with ``allow_pickle=False``; no
-torch): one weight per hash bucket, a bias and the decision threshold. A text's features are
-the counts of its n-gram ids (words lower-cased, so casing does not count), scaled to unit
-length; its score is the logistic of their dot product with the weights plus the bias, and it
-is blocked when the score reaches the threshold. An empty text passes. How the weights were
-trained and measured: :mod:`icrsumo.learn.text_guard_train` and ``tools/train_text_guard.py``.
+torch): one weight per hash bucket, a bias, the decision threshold, the seed and L2 penalty it
+was trained with. A text's features are the counts of its n-gram and word-pair ids (words
+lower-cased, so casing does not count), scaled to unit length; its score is the logistic of
+their dot product with the weights plus the bias, and it is blocked when the score reaches the
+threshold. An empty text passes. How the weights were trained and measured:
+:mod:`icrsumo.learn.text_guard_train` and ``tools/train_text_guard.py``.
 """
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -22,12 +24,12 @@ from icrsumo.core.errors import InputError
 from icrsumo.core.vocab import Verdict
 from icrsumo.guards.base import GuardContext, GuardInfo
 
-from .text import TextEncoder
+from .text import TextEncoder, words
 
 #: the shipped weights
 WEIGHTS = Path(__file__).resolve().parent / "data" / "text_guard.npz"
 #: the weights file's format
-FORMAT = "icrsumo-text-guard/1"
+FORMAT = "icrsumo-text-guard/2"
 #: hash buckets of the features (the ``ngram`` encoder's; id 0 is padding, never a feature)
 BUCKETS = 2 ** 16
 #: n-gram ids read per text (longer texts are cut)
@@ -38,12 +40,13 @@ _FIX = "rebuild it with python tools/train_text_guard.py"
 @dataclass(frozen=True)
 class TextGuardModel:
     """The classifier: ``weights`` (one per bucket, float32), ``bias``, the decision
-    ``threshold`` (a score in (0, 1)) and the ``seed`` it was trained from."""
+    ``threshold`` (a score in (0, 1)), the ``seed`` it was trained from and its ``l2`` penalty."""
 
     weights: np.ndarray
     bias: float
     threshold: float
     seed: int = 0
+    l2: float = 0.0
 
     def score(self, text: str) -> float:
         """The probability that ``text`` is misleading (0 for a text with no word)."""
@@ -57,13 +60,22 @@ class TextGuardModel:
         """Write the model as a compressed ``.npz`` of plain arrays."""
         np.savez_compressed(path, format=np.array(FORMAT), weights=self.weights.astype(np.float32),
                             bias=np.float64(self.bias), threshold=np.float64(self.threshold),
-                            seed=np.int64(self.seed))
+                            seed=np.int64(self.seed), l2=np.float64(self.l2))
+
+
+def pair_ids(text: str, buckets: int = BUCKETS) -> list[int]:
+    """The bucket ids of ``text``'s adjacent word pairs ("<police order>"), hashed as the
+    ``ngram`` encoder hashes n-grams (CRC-32; id 0 is padding, never a feature)."""
+    w = words(text)
+    return [1 + zlib.crc32(f"<{a} {b}>".encode()) % (buckets - 1) for a, b in zip(w, w[1:])][:LENGTH]
 
 
 def features(text: str, buckets: int = BUCKETS) -> tuple[np.ndarray, np.ndarray]:
-    """(bucket ids, values) of ``text``: each n-gram id's count, the vector scaled to length 1."""
+    """(bucket ids, values) of ``text``: each n-gram and word-pair id's count, the vector scaled
+    to length 1."""
     ids = TextEncoder("ngram", LENGTH, buckets=buckets).encode(text)
-    ids, counts = np.unique(ids[ids > 0], return_counts=True)
+    ids = np.concatenate([ids[ids > 0], np.array(pair_ids(text, buckets), dtype=np.int64)])
+    ids, counts = np.unique(ids, return_counts=True)
     values = counts.astype(np.float64)
     return ids, values / np.sqrt((values ** 2).sum()) if len(values) else values
 
@@ -82,7 +94,8 @@ def load_model(path: Path = WEIGHTS) -> TextGuardModel:
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as data:
-            missing = [k for k in ("format", "weights", "bias", "threshold", "seed") if k not in data.files]
+            keys = ("format", "weights", "bias", "threshold", "seed", "l2")
+            missing = [k for k in keys if k not in data.files]
             if missing:
                 raise InputError(path, missing[0], "missing array: not a text guard's weights", _FIX)
             if data["format"].shape != () or str(data["format"]) != FORMAT:
@@ -92,7 +105,7 @@ def load_model(path: Path = WEIGHTS) -> TextGuardModel:
                 raise InputError(path, "weights", f"shape {weights.shape} {weights.dtype}, expected "
                                  f"({BUCKETS},) finite float32", _FIX)
             bias, threshold = _scalar(data, path, "bias", "f"), _scalar(data, path, "threshold", "f")
-            seed = int(_scalar(data, path, "seed", "iu"))
+            seed, l2 = int(_scalar(data, path, "seed", "iu")), _scalar(data, path, "l2", "f")
     except InputError:
         raise
     except (OSError, ValueError, EOFError) as err:  # missing, not a zip, a pickled array, truncated
@@ -100,7 +113,7 @@ def load_model(path: Path = WEIGHTS) -> TextGuardModel:
                          _FIX) from None
     if not 0.0 < threshold < 1.0:
         raise InputError(path, "threshold", f"{threshold} is not in (0, 1)", _FIX)
-    return TextGuardModel(weights, bias, threshold, seed)
+    return TextGuardModel(weights, bias, threshold, seed, l2)
 
 
 @cache
