@@ -129,7 +129,9 @@ def figure(table: list[dict], path: Path) -> None:
         x, y = sum(change) / len(change), sum(shrink) / len(shrink)
         b.errorbar([x], [y], yerr=[[y - min(shrink)], [max(shrink) - y]], fmt=marker[policy],
                    color=colour[guard], capsize=3, zorder=3, label=f"{guard}, {policy}")
-    a.set(xlim=(-2, 102), ylim=(-2, 102), xlabel="false blocks: goal-preserving families (%)",
+    top = max(5.0, 1.15 * max(100 * t["false_blocks"][0] / max(t["false_blocks"][1], 1) for t in table))
+    a.set(xlim=(-0.05 * top, top), ylim=(-2, 102),
+          xlabel="false blocks: goal-preserving families (%)",
           ylabel="detection: misleading blocked (%)", title="What a guard catches")
     b.set(xlabel="DS change on goal-preserving families (mean over agents)",
           ylabel="misleading ΔDS shrink (%)", ylim=(-5, 110),
