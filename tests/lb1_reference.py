@@ -10,7 +10,8 @@ points (icrsumo's dense route of the log's polyline) and the per-step lane bits;
 else is the leaderboard's arithmetic, written here again on purpose.
 
 The results file (:func:`results_file`): ``compute_route_length``, the route record
-``compute_route_statistics`` registers for a stored episode (:func:`route_record`),
+``compute_route_statistics`` registers for a stored episode (:func:`route_record`; for a
+route whose agent crashed, over the criteria's partial run: :func:`crash_statistics`),
 ``compute_global_statistics`` and ``save_global_record``, and the route loop of
 ``leaderboard_evaluator.py`` that decides ``entry_status`` (a simulation crash ends the run).
 """
@@ -180,8 +181,11 @@ class ActorSpeedAboveThresholdTest:
 
 
 def score(log: EpisodeLog) -> dict:
-    """The leaderboard's ``score_route``, ``score_penalty``, ``score_composed`` and the reason
-    the route ended ("completed", "route_deviation", "agent_blocked", "route_timeout" or None)."""
+    """The leaderboard's ``score_route``, ``score_penalty``, ``score_composed``, the reason
+    the route ended ("completed", "route_deviation", "agent_blocked", "route_timeout" or None),
+    ``events``: the criteria's penalised traffic events (one entry per event: collisions,
+    red lights, stop signs, and "outside_route_lanes" when the ego went outside them) and
+    ``duration``: the simulated time (s) from the first tick to the last one run."""
     route = Route(log)
     completion, in_route = RouteCompletionTest(route), InRouteTest(route)
     lanes, collisions, blocked = OutsideRouteLanesTest(route), CollisionTest(), ActorSpeedAboveThresholdTest()
@@ -226,8 +230,12 @@ def score(log: EpisodeLog) -> dict:
     if pct is not None:
         score_penalty *= 1 - pct / 100
     score_route = 100.0 if completion.success else completion._percentage_route_completed
+    events = [*collisions.events, *["red_light"] * red_lights, *["stop_sign"] * stops,
+              *(["outside_route_lanes"] if pct is not None else [])]
+    duration = now - log.t[0] if log.t else 0.0  # GameTime from the first tick to the last one run
     return {"score_route": score_route, "score_penalty": score_penalty,
-            "score_composed": max(score_route * score_penalty, 0.0), "ended": ended}
+            "score_composed": max(score_route * score_penalty, 0.0), "ended": ended, "events": events,
+            "duration": duration}
 
 
 # ------------------------------------------------------------------ the results file
@@ -264,10 +272,14 @@ def crash_message(rec: EpisodeRecord) -> str:
     return "Simulation crashed" if rec.termination == "sim_error" else ""
 
 
-def route_record(rec: EpisodeRecord, index: int, route_id: str, trajectory) -> dict:
+def route_record(rec: EpisodeRecord, index: int, route_id: str, trajectory, log: EpisodeLog | None = None
+                 ) -> dict:
     """``compute_route_statistics`` for a stored episode: its infractions are the criteria's
-    traffic events, its termination the criterion that ended it; a crashed episode has no
-    scenario (nothing was recorded)."""
+    traffic events, its termination the criterion that ended it. A crashed episode: with
+    ``log`` (its steps up to the crash) the criteria run over that log until the crash
+    (:func:`crash_statistics`), without one nothing was recorded."""
+    if rec.status == "crashed" and log is not None:
+        return crash_statistics(rec, index, route_id, trajectory, log)
     record = {"route_id": route_id, "index": index, "status": "Started",
               "infractions": {k: [] for k in INFRACTION_KEYS},
               "scores": {"score_route": 0, "score_penalty": 0, "score_composed": 0}, "meta": {}}
@@ -290,6 +302,29 @@ def route_record(rec: EpisodeRecord, index: int, route_id: str, trajectory) -> d
             score_route = rec.rc
     record["scores"] = {"score_route": score_route, "score_penalty": score_penalty,
                         "score_composed": max(score_route * score_penalty, 0.0)}
+    record["status"] = "Completed" if target_reached else "Failed" + (" - " + failure if failure else "")
+    return record
+
+
+def crash_statistics(rec: EpisodeRecord, index: int, route_id: str, trajectory, log: EpisodeLog) -> dict:
+    """``compute_route_statistics`` for a route whose agent crashed (``failure`` "Agent crashed"):
+    the criteria ticked over the log's steps (:func:`score`), their traffic events the
+    infractions, a criterion that ended the route overriding the failure (as
+    ``compute_route_statistics`` overrides it), ``duration_game`` the simulated time run."""
+    s = score(log)
+    record = {"route_id": route_id, "index": index, "status": "Started",
+              "infractions": {k: [] for k in INFRACTION_KEYS},
+              "scores": {"score_route": 0, "score_penalty": 0, "score_composed": 0},
+              "meta": {"duration_system": -1, "duration_game": s["duration"],
+                       "route_length": compute_route_length(trajectory)}}
+    failure = crash_message(rec)
+    for kind in s["events"]:
+        record["infractions"][EVENTS[kind][0]].append(kind)
+    if s["ended"] in ENDINGS:
+        key, failure = ENDINGS[s["ended"]]
+        record["infractions"][key].append(s["ended"])
+    record["scores"] = {k: s[k] for k in ("score_route", "score_penalty", "score_composed")}
+    target_reached = s["ended"] == "completed"
     record["status"] = "Completed" if target_reached else "Failed" + (" - " + failure if failure else "")
     return record
 
@@ -367,14 +402,17 @@ def results_file(route_records: list[dict]) -> dict:
     return data
 
 
-def leaderboard_file(records: list[EpisodeRecord], key_points: dict | None = None) -> dict:
+def leaderboard_file(records: list[EpisodeRecord], key_points: dict | None = None,
+                     logs: dict | None = None) -> dict:
     """:func:`results_file` of one agent's and family's stored episodes, run in icrsumo's order
     (route id, k, seed); a route's trajectory is its key points (``key_points``: route id ->
-    points) or, where they are not known, a straight line of the record's length."""
+    points) or, where they are not known, a straight line of the record's length; ``logs``:
+    (agent, route id, family, k, seed) -> the stored log of a crashed episode that has one."""
     ordered = sorted(records, key=lambda r: (r.route_id, r.k, r.seed))
     return results_file([
         route_record(r, i, f"RouteScenario_{r.route_id}_{r.family}_{r.k}",
-                     (key_points or {}).get(r.route_id) or [(0.0, 0.0), (r.length, 0.0)])
+                     (key_points or {}).get(r.route_id) or [(0.0, 0.0), (r.length, 0.0)],
+                     (logs or {}).get((r.agent, r.route_id, r.family, r.k, r.seed)))
         for i, r in enumerate(ordered)])
 
 

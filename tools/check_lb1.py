@@ -1,7 +1,8 @@
 """Rescore every stored episode of an evaluation folder with the leaderboard's code transcribed
 independently in tests/lb1_reference.py, and compare with the stored Leaderboard 1.0 scores;
 then compare each of the folder's results files (``leaderboard/<agent>_<family>.json``) with
-the file the transcription builds from the same records and the routes' key points.
+the file the transcription builds from the same records, the routes' key points and the
+stored logs of crashed episodes (their criteria's partial run).
 
     python tools/check_lb1.py OUT [OUT ...]
 
@@ -59,12 +60,15 @@ def key_points(out: Path) -> dict:
 
 
 def check_files(out: Path, store: ResultStore) -> bool:
-    """Each results file of the folder against the transcription's file of the same records."""
+    """Each results file of the folder against the transcription's file of the same records
+    (and the stored logs of crashed episodes, scored up to the crash)."""
     if json.loads((out / "config.json").read_text(encoding="utf-8")).get("scoring") != "lb1":
         print(f"{out}: results files not compared (not scored by lb1)")
         return True
     records = store.records()
     points = key_points(out)
+    keys = [(r.agent, r.route_id, r.family, r.k, r.seed) for r in records if r.status == "crashed"]
+    logs = {key: log for key in keys if (log := store.episode_log(*key)) is not None}
     n = bad = 0
     for agent, family in sorted({(r.agent, str(r.family)) for r in records}):
         path = out / "leaderboard" / f"{file_name(agent)}_{file_name(family)}.json"
@@ -72,7 +76,7 @@ def check_files(out: Path, store: ResultStore) -> bool:
             continue
         mine = json.loads(path.read_text(encoding="utf-8"))
         ref = lb1_reference.leaderboard_file([r for r in records if r.agent == agent and r.family == family],
-                                             points)
+                                             points, logs)
         diffs = lb1_reference.differences(mine, ref)
         n += 1
         if diffs:

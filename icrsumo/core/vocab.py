@@ -46,7 +46,8 @@ class Termination(StrEnum):
     the route, or more than 30 % of the route advanced while 15 m or more from it;
     agent_blocked: more than 180 s since the ego last moved at 0.1 m/s or more; route_timeout:
     int(0.8 s per metre + 5 s) elapsed; stuck: SUMO teleported the ego; sim_error: the
-    simulator failed."""
+    simulator failed; agent_error: the agent (or its instruction guard) raised, timed out or
+    broke the protocol (the log of a crashed episode, up to its last step)."""
 
     COMPLETED = "completed"
     ROUTE_DEVIATION = "route_deviation"
@@ -54,6 +55,7 @@ class Termination(StrEnum):
     ROUTE_TIMEOUT = "route_timeout"
     STUCK = "stuck"
     SIM_ERROR = "sim_error"
+    AGENT_ERROR = "agent_error"
 
     @property
     def cls(self) -> TerminationClass:
@@ -69,6 +71,7 @@ TERMINATION_CLASS: dict[Termination, TerminationClass] = {
     Termination.ROUTE_TIMEOUT: TerminationClass.TO,
     Termination.STUCK: TerminationClass.TO,
     Termination.SIM_ERROR: TerminationClass.TO,
+    Termination.AGENT_ERROR: TerminationClass.TO,
 }
 
 

@@ -13,7 +13,8 @@ The byte format (version 1), defined by :func:`digest_lines`:
   strings by code point and integers by value:
   ``[AGENT,ROUTE_ID,FAMILY,K,SEED,"log",HEX]`` with HEX the SHA-256 (64 lowercase hex digits)
   of the UTF-8 bytes of the episode's stored log, the uncompressed JSON text
-  (:meth:`icrsumo.results.store.ResultStore.log`); an episode stored without a log (a crashed one)
+  (:meth:`icrsumo.results.store.ResultStore.log`; a crashed episode's log up to the crash holds
+  its termination ``agent_error`` and message); an episode stored without a log (a crashed one)
   gives ``[AGENT,ROUTE_ID,FAMILY,K,SEED,"no-log",HEX]`` with HEX the SHA-256 of the UTF-8 bytes
   of ``json.dumps([STATUS,MESSAGE], ensure_ascii=True, separators=(",", ":"))`` (a missing
   message is ``""``);

@@ -1,7 +1,8 @@
 """Running one episode job in a worker: the agent's calls guarded by a
 :class:`~icrsumo.agents.hosting.watch.CallWatch`, the episode scored, and a typed :class:`Outcome`
 returned (never an exception): done with its record and log, crashed with an
-:class:`~icrsumo.core.vocab.ErrorKind` and a one-line message, or timed out."""
+:class:`~icrsumo.core.vocab.ErrorKind` and a one-line message, or timed out (a crash or timeout
+inside the episode's loop keeps the log of its steps up to it)."""
 
 from __future__ import annotations
 
@@ -16,9 +17,10 @@ from icrsumo.agents.base import Agent, AgentTimeout
 from icrsumo.agents.hosting.watch import CallWatch, Unwatched
 from icrsumo.agents.registry import agent_factory
 from icrsumo.core.errors import Interrupted, describe
-from icrsumo.core.types import EpisodeLog, EpisodeRecord, EpisodeResult, InstructionSet
+from icrsumo.core.types import EpisodeLog, EpisodeRecord, InstructionSet
 from icrsumo.core.vocab import EpisodeStatus, ErrorKind, OutcomeStatus, Phase, Verdict
 from icrsumo.guards.base import split_policy, split_row
+from icrsumo.scoring.leaderboard import with_scores
 from icrsumo.sim.callbacks import PhaseClock
 from icrsumo.world.scenario import Scenario
 
@@ -30,8 +32,11 @@ from .profile import JobTiming
 class Outcome:
     """What running one job gave. ``status`` done: ``record`` (attempts 1) and ``log_json``;
     crashed or timed_out: ``error_kind`` and ``message`` (one line, e.g.
-    ``RuntimeError: agent exploded at my_agent.py:35``). ``timing``: the job's phases when
-    its job asked for a profile (``Job.profile``; never stored)."""
+    ``RuntimeError: agent exploded at my_agent.py:35``) and, when the episode had recorded
+    steps before the agent (or its guard) raised or timed out, ``log_json``: its log up to the
+    last completed step (termination agent_error), with ``record``: the crashed record to
+    store beside it (status crashed, no scores, the route's ``length``). ``timing``: the job's
+    phases when its job asked for a profile (``Job.profile``; never stored)."""
 
     status: OutcomeStatus
     record: EpisodeRecord | None = None
@@ -51,10 +56,11 @@ class Outcome:
         return cls(status, error_kind=kind, message=message)
 
     @classmethod
-    def of_error(cls, err: BaseException) -> Outcome:
-        """The outcome of an exception raised while running the episode."""
+    def of_error(cls, err: BaseException, record: EpisodeRecord | None = None, log_json: str = "") -> Outcome:
+        """The outcome of an exception raised while running the episode (with the crashed
+        ``record`` and the partial log it is stored with, where there is one)."""
         kind = ErrorKind.AGENT_TIMEOUT if isinstance(err, AgentTimeout) else ErrorKind.ERROR
-        return cls.failure(kind, describe(err))
+        return replace(cls.failure(kind, describe(err)), record=record, log_json=log_json)
 
 
 class WatchedAgent:
@@ -179,7 +185,7 @@ class EpisodeWorker:
     def _run(self, job: Job, clock: PhaseClock | None) -> Outcome:
         from icrsumo.results.logs import ask_counts, dumps_log, loads_log
         from icrsumo.scoring import score_episode
-        from icrsumo.sim.episode import RunOptions, run_episode
+        from icrsumo.sim.episode import RunOptions, drive_episode
 
         lap = clock.lap if clock is not None else _no_lap
         try:
@@ -191,15 +197,17 @@ class EpisodeWorker:
             agent = WatchedAgent(factory(), self.watch)
             lap(Phase.AGENT_LOAD)
             try:
-                log = run_episode(sc, iset, agent, RunOptions(scoring=job.scoring, asking=job.asking,
-                                                              on_block=job.on_block),
-                                  guard=guard, baseline=baseline, clock=clock)
+                log, error = drive_episode(sc, iset, agent, RunOptions(
+                    scoring=job.scoring, asking=job.asking, on_block=job.on_block),
+                    guard=guard, baseline=baseline, clock=clock)
             finally:
                 agent.close()  # the optional close() hook: e.g. a remote agent ends its session
-            text = dumps_log(log)
-            lap(Phase.LOGGING)
             if clock is not None:
                 clock.steps = len(log.t)
+            if error is not None:  # the agent or its guard raised: the log of the steps up to it
+                return Outcome.of_error(error, *partial_crash(job, sc.length, log))
+            text = dumps_log(log)
+            lap(Phase.LOGGING)
             r = score_episode(loads_log(text), job.scoring)  # the stored log: a rescore gives the same
             lap(Phase.SCORING)
             asks, answered = ask_counts(log)
@@ -227,6 +235,23 @@ class EpisodeWorker:
         self.factories.clear()
 
 
+def partial_crash(job: Job, length: float, log: EpisodeLog) -> tuple[EpisodeRecord | None, str]:
+    """The crashed record of ``job`` (no scores; the route's ``length``, m) and the JSON text of
+    ``log``, the episode's steps up to the crash; (None, "") when it recorded no step or cannot
+    be written (the crash's own message is what the outcome keeps)."""
+    from icrsumo.results.logs import dumps_log
+
+    try:
+        text = dumps_log(log) if log.t else ""
+    except (ValueError, TypeError):
+        text = ""
+    if not text:
+        return None, ""
+    rec = EpisodeRecord(agent=job.agent, route_id=job.route_id, family=job.family, k=job.k, seed=job.seed,
+                        status=EpisodeStatus.CRASHED, length=round(length, 2), message=log.message)
+    return rec, text
+
+
 def _no_lap(phase: str) -> None:
     """A lap of no clock (a job without a profile)."""
 
@@ -240,14 +265,6 @@ def guard_counts(log: EpisodeLog, iset: InstructionSet) -> dict[str, int]:
     repaired = sum(d.verdict is Verdict.REPAIR for d in mine)
     return {"guard_checked": len(mine), "guard_repaired": repaired,
             "guard_blocked": sum(d.verdict is Verdict.BLOCK for d in mine) + repaired}
-
-
-def with_scores(rec: EpisodeRecord, r: EpisodeResult) -> EpisodeRecord:
-    """``rec`` with the scores, termination, infractions and duration of ``r``."""
-    return replace(rec, ds=r.ds, rc=r.rc, is_=r.is_, termination=r.termination,
-                   termination_class=r.termination_class.value,
-                   infractions=tuple((i.kind, i.factor) for i in r.infractions), duration=r.duration,
-                   outside_m=r.outside_m)
 
 
 def run_job(job: Job, watch: CallWatch | None = None) -> Outcome:

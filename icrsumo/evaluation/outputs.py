@@ -5,10 +5,11 @@ the summary, :mod:`icrsumo.reporting` writes them)."""
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 
 from icrsumo.core.errors import Field, InputError, note, note_names
-from icrsumo.core.types import EpisodeRecord
+from icrsumo.core.types import EpisodeLog, EpisodeRecord
 from icrsumo.instructions.families import ALL_FAMILIES
 from icrsumo.instructions.store import skipped_families
 from icrsumo.results.store import ResultStore
@@ -64,7 +65,8 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     attribution = attribution_doc(records, decisions)
     scen = route_scenarios(scenarios)
     table = write_report(summary, records, out, ends,
-                         key_points={rid: sc.key_points for rid, sc in scen.items() if sc.key_points})
+                         key_points={rid: sc.key_points for rid, sc in scen.items() if sc.key_points},
+                         logs=crash_logs(store))
     write_attribution(summary, attribution, out)
     table += write_guards(summary, records, out)
     write_html(out, summary, records, attribution, store, scen, instr_dir)
@@ -124,6 +126,19 @@ def route_scenarios(scenarios: Path) -> dict[str, Scenario]:
                 continue
             scen[sc.route_id] = sc
     return scen
+
+
+def crash_logs(store: ResultStore) -> Callable[[EpisodeRecord], EpisodeLog | None]:
+    """A crashed episode's stored log (its steps up to the crash), which the leaderboard files
+    score; a damaged one is named on stderr and the episode scored as stored without one."""
+    def log(r: EpisodeRecord) -> EpisodeLog | None:
+        try:
+            return store.episode_log(r.agent, r.route_id, r.family, r.k, r.seed)
+        except InputError as err:
+            note(f"the leaderboard files score a crashed episode as having no log: {err.line()}")
+            return None
+
+    return log
 
 
 def write_html(out: Path, summary: Summary, records: list[EpisodeRecord], attribution: dict,

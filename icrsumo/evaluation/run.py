@@ -343,7 +343,9 @@ def run_queue(queue: list[Job], opts: EvalOptions, store: ResultStore, progress:
               sink: ProfileSink | None = None) -> None:
     """Run ``queue`` on the backend, storing each episode at once; an episode that crashed
     (:data:`RETRIED` kinds) is run again once, then stored as crashed; a timed-out one is stored
-    at once. ``sink`` collects the jobs' timings (``opts.profile``)."""
+    at once. A crashed episode is stored with the log of its last attempt's steps up to the
+    crash, where there is one (:class:`~icrsumo.evaluation.execute.Outcome`). ``sink`` collects
+    the jobs' timings (``opts.profile``)."""
     attempts: dict[tuple, int] = {}
     while queue:
         retry = []
@@ -360,9 +362,10 @@ def run_queue(queue: list[Job], opts: EvalOptions, store: ResultStore, progress:
             elif n < MAX_ATTEMPTS and outcome.error_kind in RETRIED:
                 retry.append(job)
             else:
-                store.put(EpisodeRecord(job.agent, job.route_id, job.family, job.k, job.seed,
-                                        status=EpisodeStatus.CRASHED, attempts=n,
-                                        message=outcome.message[:MAX_MESSAGE]))
+                rec = outcome.record or EpisodeRecord(job.agent, job.route_id, job.family, job.k, job.seed,
+                                                      status=EpisodeStatus.CRASHED)
+                store.put(replace(rec, attempts=n, message=outcome.message[:MAX_MESSAGE]),
+                          outcome.log_json or None)
                 progress.tick()
         if sink is not None:
             sink.round_end()

@@ -13,6 +13,7 @@ from icrsumo.results.aggregate import EPISODE_COLUMNS, episode_table
 from icrsumo.results.summary import BASELINE, Summary
 from icrsumo.scoring import DEFAULT_SCORING, get_scoring
 from icrsumo.scoring.base import KeyPoints
+from icrsumo.scoring.leaderboard import Logs
 
 from .cells import csv_text, file_name
 from .figures import delta_bars, figure_or_note, rd_to_plane
@@ -21,26 +22,29 @@ from .tables import tables
 
 
 def write_leaderboard(summary: Summary, records: Sequence[EpisodeRecord], out_dir: Path,
-                      key_points: KeyPoints | None = None) -> None:
+                      key_points: KeyPoints | None = None, logs: Logs | None = None) -> None:
     """leaderboard/<agent>_<family>.json (baseline included) for every agent and family with
     records, in the layout of the summary's scoring; ``key_points``: route id -> the route
-    file's waypoints, where known (:meth:`icrsumo.scoring.Scoring.leaderboard_file`)."""
+    file's waypoints, where known; ``logs``: a crashed episode's stored log, where there is
+    one (:meth:`icrsumo.scoring.Scoring.leaderboard_file`)."""
     checkpoint = get_scoring(summary.scoring or DEFAULT_SCORING).leaderboard_file
     for agent in summary.agents:
         for fam in [BASELINE, *summary.families]:
-            cp = checkpoint(records, agent, fam, key_points=key_points)
+            cp = checkpoint(records, agent, fam, key_points=key_points, logs=logs)
             if cp["_checkpoint"]["records"]:
                 write_atomic(Path(out_dir) / "leaderboard" / f"{file_name(agent)}_{file_name(fam)}.json",
                              dumps_json(cp))
 
 
 def write_report(summary: Summary, records: Sequence[EpisodeRecord], out_dir: Path,
-                 ends: dict | None = None, key_points: KeyPoints | None = None) -> str:
+                 ends: dict | None = None, key_points: KeyPoints | None = None,
+                 logs: Logs | None = None) -> str:
     """Write summary.json, results.{md,csv,tex}, statistics.{md,csv}, episodes.csv, figures/rd_to.png,
     figures/delta_bars.png and leaderboard/<agent>_<family>.json (baseline included) under
     ``out_dir``; returns the Markdown table. ``ends``: the episodes' log facts for episodes.csv
-    (:func:`icrsumo.results.aggregate.episode_table`); ``key_points``: the routes' waypoints for
-    the leaderboard files (:func:`write_leaderboard`); paired rollout figures are written by the caller."""
+    (:func:`icrsumo.results.aggregate.episode_table`); ``key_points``, ``logs``: the routes'
+    waypoints and the crashed episodes' stored logs for the leaderboard files
+    (:func:`write_leaderboard`); paired rollout figures are written by the caller."""
     out = Path(out_dir)
     write_atomic(out / "summary.json", summary.to_json())
     t = tables(summary)
@@ -55,5 +59,5 @@ def write_report(summary: Summary, records: Sequence[EpisodeRecord], out_dir: Pa
                                                                    for row in rows)))
     figure_or_note(rd_to_plane, summary, out / "figures" / "rd_to.png")
     figure_or_note(delta_bars, summary, out / "figures" / "delta_bars.png")
-    write_leaderboard(summary, records, out, key_points)
+    write_leaderboard(summary, records, out, key_points, logs)
     return t["md"]

@@ -15,6 +15,7 @@ from icrsumo.core.types import EpisodeLog, EpisodeRecord, EpisodeResult, Event, 
 from icrsumo.core.vocab import EventKind
 
 from .criteria import RouteRules, TerminationMonitor, cut_at_end, ended_by
+from .leaderboard import Logs
 from .penalties import PENALTIES, RULE_EVENTS, check_event_kinds, episode_result
 from .route import DenseRoute
 
@@ -48,10 +49,11 @@ class Scoring(ABC):
 
     @abstractmethod
     def leaderboard_file(self, records: Iterable[EpisodeRecord], agent: str, family: str,
-                         key_points: KeyPoints | None = None) -> dict:
+                         key_points: KeyPoints | None = None, logs: Logs | None = None) -> dict:
         """The episodes of one agent and family as the leaderboard's results file (JSON-ready).
         ``key_points``: route id -> the route file's waypoints (m), where known, for a file
-        whose route length is theirs."""
+        whose route length is theirs; ``logs``: a crashed episode's stored log (its steps up to
+        the crash; None: none), for a file that scores what its criteria had computed."""
 
     def route_infractions(self, log: EpisodeLog, mon: TerminationMonitor | None) -> list[Infraction]:
         """The infractions of the route criteria's finished monitor: outside route lanes, only

@@ -384,7 +384,8 @@ def cut_at_end(log: EpisodeLog, rules: RouteRules
     rules end the episode where it was recorded, the usual case)."""
     mon, end = run_monitor(log, rules)
     if end is None:
-        return log, log.termination in (Termination.SIM_ERROR, Termination.STUCK), mon
+        off_rules = (Termination.SIM_ERROR, Termination.STUCK, Termination.AGENT_ERROR)
+        return log, log.termination in off_rules, mon
     kind, t = end
     n = bisect.bisect_right(log.t, t + EPS)
     if n >= len(log.t) and kind == log.termination:

@@ -30,7 +30,7 @@ from icrsumo.core.vocab import EpisodeStatus, EventKind
 
 from .base import KeyPoints, Scoring
 from .criteria import EPS, OFF_LANES, WRONG_LANE, RouteRules, events_by_step, route_timeout
-from .leaderboard import LABELS, agent_records, record_infractions, route_name
+from .leaderboard import LABELS, Logs, agent_records, crash_scored, record_infractions, route_name
 from .penalties import MAX_ID_TIME, contacts
 
 #: Leaderboard 1.0's route criteria (scenario_runner, branch leaderboard-1.0)
@@ -120,10 +120,11 @@ def lb_route_length(r: EpisodeRecord, key_points: KeyPoints | None) -> float:
 
 
 def _lb_record(r: EpisodeRecord, index: int, length: float) -> dict:
-    """One route's record. A crashed episode has no log: scores 0, 1 and 0, what the leaderboard
-    writes for a route whose criteria recorded nothing."""
+    """One route's record. A crashed episode scored from its partial log has that log's scores
+    (:func:`~icrsumo.scoring.leaderboard.crash_scored`); one without a log (no termination)
+    scores 0, 1 and 0, what the leaderboard writes for a route whose criteria recorded nothing."""
     status, infr = record_infractions(r, LB_INFRACTIONS, _wording)
-    crashed = r.status == EpisodeStatus.CRASHED
+    crashed = r.status == EpisodeStatus.CRASHED and not r.termination
     return {
         "route_id": route_name(r),
         "index": index,
@@ -160,16 +161,18 @@ def _entry_status(statuses: Sequence[str]) -> tuple[str, bool]:
 
 
 def leaderboard_checkpoint(records: Iterable[EpisodeRecord], agent: str, family: str,
-                           key_points: KeyPoints | None = None) -> dict:
+                           key_points: KeyPoints | None = None, logs: Logs | None = None) -> dict:
     """The episodes of one agent and family as a CARLA Leaderboard 1.0 checkpoint (``result.json``).
 
     Reproduces ``leaderboard/utils/statistics_manager.py`` (the final ``leaderboard-1.0``
     branch, ``compute_global_statistics`` and ``save_global_record``): records sorted by
     (route_id, k, seed); each route's length is its key points' (``key_points``: route id ->
     the route file's waypoints, m; the record's ``length`` where not given); a crashed episode
-    scores RC 0, IS 1, DS 0 (no log: no criterion recorded anything) with the status 'Failed -
-    Agent crashed' or 'Failed - Simulation crashed'
-    (:func:`~icrsumo.scoring.leaderboard.route_status`); the global scores are means over
+    has the status 'Failed - Agent crashed' or 'Failed - Simulation crashed'
+    (:func:`~icrsumo.scoring.leaderboard.route_status`) and, where ``logs`` holds its log of
+    the steps up to the crash, that log's RC, IS, DS, infractions and duration by these rules
+    (the criteria's partial scores, as the leaderboard keeps them), else RC 0, IS 1, DS 0 (no
+    criterion recorded anything); the global scores are means over
     *every* record, with the sample standard deviation; each infraction rate is the sum over
     records with RC > 0 of the record's count / (RC / 100 x route km); every record that is
     not 'Completed' is in ``meta.exceptions`` (absent when there is none). ``entry_status``:
@@ -182,7 +185,7 @@ def leaderboard_checkpoint(records: Iterable[EpisodeRecord], agent: str, family:
     crash; here every record is in the file and in the global record."""
     import numpy as np  # here: the command line reads the registry without numpy
 
-    mine = agent_records(records, agent, family)
+    mine = crash_scored(agent_records(records, agent, family), logs, LB1.score)
     recs = [_lb_record(r, i, lb_route_length(r, key_points)) for i, r in enumerate(mine)]
     n = len(recs)
     infr = _rates(recs)
@@ -236,8 +239,8 @@ class Leaderboard1(Scoring):
         return route_timeout(route_length)
 
     def leaderboard_file(self, records: Iterable[EpisodeRecord], agent: str, family: str,
-                         key_points: KeyPoints | None = None) -> dict:
-        return leaderboard_checkpoint(records, agent, family, key_points)
+                         key_points: KeyPoints | None = None, logs: Logs | None = None) -> dict:
+        return leaderboard_checkpoint(records, agent, family, key_points, logs)
 
 
 #: the Leaderboard 1.0 rule set (registered as ``lb1`` by :mod:`icrsumo.scoring`)

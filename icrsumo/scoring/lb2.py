@@ -30,7 +30,7 @@ from .criteria import (
     TerminationMonitor,
     events_by_step,
 )
-from .leaderboard import LABELS, agent_records, record_infractions, route_name
+from .leaderboard import LABELS, Logs, agent_records, record_infractions, route_name
 from .penalties import MAX_ID_TIME, contacts
 
 #: Leaderboard 2.0's route criteria (scenario_runner's and leaderboard's 2.0 branches):
@@ -221,8 +221,9 @@ class Leaderboard2(Scoring):
         return out
 
     def leaderboard_file(self, records: Iterable[EpisodeRecord], agent: str, family: str,
-                         key_points: KeyPoints | None = None) -> dict:
-        """2.0's file (its route length is the interpolated route's: ``key_points`` is not used)."""
+                         key_points: KeyPoints | None = None, logs: Logs | None = None) -> dict:
+        """2.0's file (its route length is the interpolated route's: ``key_points`` is not used;
+        a crashed episode is scored as stored: ``logs`` is not used)."""
         return leaderboard_checkpoint_lb2(records, agent, family)
 
 

@@ -27,7 +27,7 @@ from functools import cache
 from pathlib import Path
 
 from icrsumo.agents.base import Action, Agent, EpisodeInfo, Observation, World, validate_action
-from icrsumo.core.errors import Field, InputError
+from icrsumo.core.errors import Field, InputError, Interrupted, describe
 from icrsumo.core.types import EgoRoute, EpisodeLog, Event, InstructionSet
 from icrsumo.core.vocab import EventKind, Family, Phase, Termination
 from icrsumo.guards.base import Guard, guarded_name
@@ -198,6 +198,16 @@ class Episode:
         self.termination, self.term_t, self.done = termination, t, True
         for cb in self.callbacks:
             cb.on_end(self)
+
+    def abort(self, message: str) -> None:
+        """End the episode after a failure off the simulator (the agent's or its guard's call
+        raised): termination agent_error at the last recorded step's time, ``message`` as the
+        log's; the log keeps the steps recorded so far. Nothing happens once it has ended."""
+        if self.done:
+            return
+        self.message = message
+        ts = self.recorder.cols["t"]
+        self._finish(Termination.AGENT_ERROR, round(ts[-1], 3) + 0.0 if ts else 0.0)
 
     def _sim_error(self, err: SimulatorError) -> None:
         try:
@@ -424,29 +434,67 @@ def run_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
     With ``options.asking`` the navigator answers the agent's asks in the words of ``baseline``
     (the route's baseline sequence); they are the log's ``asks``. With a ``clock``
     (:class:`~icrsumo.sim.callbacks.PhaseClock`) the episode's wall time is split into its
-    phases (:class:`~icrsumo.core.vocab.Phase`); the log is the same."""
+    phases (:class:`~icrsumo.core.vocab.Phase`); the log is the same.
+    An exception raised while the episode runs (by the agent, its guard, an action the checks
+    refuse) ends the episode and is raised again (:func:`drive_episode` returns it instead,
+    beside the log up to the last completed step)."""
+    log, error = drive_episode(scenario, instructions, agent, options, callbacks, guard, baseline, clock)
+    if error is not None:
+        raise error
+    return log
+
+
+def drive_episode(scenario: Scenario, instructions: InstructionSet, agent: Agent,
+                  options: RunOptions = RunOptions(),  # noqa: B008
+                  callbacks: Sequence[EpisodeCallback] = (), guard: Guard | None = None,
+                  baseline: InstructionSet | None = None, clock: PhaseClock | None = None
+                  ) -> tuple[EpisodeLog, BaseException | None]:
+    """:func:`run_episode` that returns what the episode raised instead of raising it: the log
+    and None, or, when the agent's ``reset`` or ``act``, its guard's calls or anything else in
+    the loop raised (a timeout its calls are under included), the log up to the last completed
+    step (termination agent_error, the error in one line as its message:
+    :func:`~icrsumo.core.errors.describe`; no step when ``reset`` raised) and that exception.
+    The user's Ctrl-C during an evaluation (:class:`~icrsumo.core.errors.Interrupted`) is raised."""
+    error: BaseException | None = None
     with Episode(scenario, instructions, options, privileged=bool(getattr(agent, "privileged", False)),
                  needs_route=bool(getattr(agent, "needs_route", False)), callbacks=callbacks,
                  guard=guard, baseline=baseline, clock=clock) as ep:
         if clock is not None:
             clock.lap(Phase.EPISODE_SETUP)
-        agent.reset(ep.info)
-        if clock is not None:
-            clock.lap(Phase.AGENT_LOAD)
-        obs = ep.start()
-        hooks = ep.callbacks[1:]  # the recorder needs no act hooks
-        while obs is not None:
-            for cb in hooks:
-                cb.on_act_start(ep, obs)
-            action = agent.act(obs)
-            for cb in hooks:
-                cb.on_act_end(ep, action)
-            if clock is not None:
-                clock.lap(Phase.ACT)
-            obs = ep.step(action)
+        try:
+            _loop(ep, agent, clock)
+        except Interrupted:
+            raise
+        except BaseException as err:  # noqa: BLE001 - the agent's code may raise anything (sys.exit too)
+            error = err
+            ep.abort(describe(err))
     if clock is not None:
         clock.lap(Phase.SUMO_START)  # SUMO closed
     name = getattr(agent, "name", type(agent).__name__)
     log = ep.log(name if ep.guarded is None else guarded_name(name, ep.guarded.name, ep.guarded.on_block))
     calls = getattr(agent, "episode_calls", None)  # an agent that asks a language model
-    return replace(log, model_calls=tuple(calls())) if callable(calls) else log
+    if callable(calls):
+        try:
+            log = replace(log, model_calls=tuple(calls()))
+        except Exception:
+            if error is None:
+                raise
+    return log, error
+
+
+def _loop(ep: Episode, agent: Agent, clock: PhaseClock | None) -> None:
+    """Reset ``agent``, start ``ep`` and let the agent act on each observation until it ends."""
+    agent.reset(ep.info)
+    if clock is not None:
+        clock.lap(Phase.AGENT_LOAD)
+    obs = ep.start()
+    hooks = ep.callbacks[1:]  # the recorder needs no act hooks
+    while obs is not None:
+        for cb in hooks:
+            cb.on_act_start(ep, obs)
+        action = agent.act(obs)
+        for cb in hooks:
+            cb.on_act_end(ep, action)
+        if clock is not None:
+            clock.lap(Phase.ACT)
+        obs = ep.step(action)

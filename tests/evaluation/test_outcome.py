@@ -69,11 +69,24 @@ def test_a_finished_episode_is_done_with_its_record_and_log(baseline_job):
     assert out.log_json.startswith("{") and rec.duration > 0
 
 
+def _partial(out: Outcome, steps: int) -> None:
+    """``out`` carries the crashed record (no scores, the route's length) and the log of the
+    ``steps`` steps recorded before the crash, ended agent_error with the outcome's message."""
+    from icrsumo.results.logs import loads_log
+
+    rec = out.record
+    assert (rec.status, rec.ds, rec.rc, rec.is_, rec.termination, rec.message) == (
+        "crashed", 0.0, 0.0, 0.0, "", out.message)
+    assert rec.length > 0
+    log = loads_log(out.log_json)
+    assert (len(log.t), log.termination, log.message) == (steps, "agent_error", out.message)
+
+
 def test_a_raising_agent_is_crashed_with_an_error_kind(baseline_job):
     out = run_job(baseline_job("Raises"))
     assert out.status is OutcomeStatus.CRASHED and out.error_kind is ErrorKind.ERROR
-    assert out.record is None and out.log_json == ""
     assert out.message.startswith("RuntimeError: agent exploded at user_agents.py:")
+    _partial(out, 5)  # it raised on its 3rd decision, which read step 4
 
 
 def test_a_hang_under_sigalrm_is_timed_out(baseline_job):
@@ -82,6 +95,7 @@ def test_a_hang_under_sigalrm_is_timed_out(baseline_job):
     assert time.perf_counter() - t0 < 30
     assert out.status is OutcomeStatus.TIMED_OUT and out.error_kind is ErrorKind.AGENT_TIMEOUT
     assert out.message.startswith("AgentTimeout: agent did not answer within 0.5 s at ")
+    _partial(out, 5)  # the loop stopped cleanly: its steps are kept
 
 
 def test_the_local_watchdog_and_a_dead_worker_give_typed_outcomes(baseline_job):
@@ -89,7 +103,7 @@ def test_the_local_watchdog_and_a_dead_worker_give_typed_outcomes(baseline_job):
     outcomes = {job.agent: out for job, out in run_local(jobs, workers=2, timeout=1.0)}
     hung, died, fine = outcomes["hangs"], outcomes["dies"], outcomes["cruise"]
     assert (hung.status, hung.error_kind) == (OutcomeStatus.TIMED_OUT, ErrorKind.AGENT_TIMEOUT)
-    assert hung.message == HUNG
+    assert hung.message == HUNG and hung.log_json == ""  # its process was stopped: no log
     assert (died.status, died.error_kind) == (OutcomeStatus.CRASHED, ErrorKind.WORKER_DIED)
     assert died.message == "WorkerDied: the worker process died (exit code 3) while running this episode"
     assert fine.status is OutcomeStatus.DONE

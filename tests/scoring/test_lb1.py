@@ -18,7 +18,7 @@ from hand_logs import ROUTE, contact, make_log, straight  # tests/ is on pytest'
 from records_example import rec, tiny
 
 from icrsumo.core.fsio import dumps_json
-from icrsumo.core.types import EpisodeRecord, Event
+from icrsumo.core.types import EpisodeLog, EpisodeRecord, Event
 from icrsumo.scoring import score_episode
 from icrsumo.scoring.lb1 import LB1, counted_collisions, leaderboard_checkpoint
 from icrsumo.scoring.penalties import PENALTIES
@@ -226,6 +226,55 @@ def test_a_crashed_episode_is_the_agents_unless_the_simulation_failed():
         assert (cp["entry_status"], cp["eligible"]) == ("Crashed", False)
 
 
+def _by_key(logs: dict):
+    """The ``logs`` argument of the results file: a record's log in ``logs`` (by its key)."""
+    return lambda r: logs.get((r.agent, r.route_id, r.family, r.k, r.seed))
+
+
+def _partial(n: int, xy=None, **kw) -> EpisodeLog:
+    """An agent's crash after ``n`` steps on :data:`ROUTE`: the log of the steps up to it."""
+    log = make_log(xy or straight(n), ROUTE, termination="agent_error", **kw)
+    return replace(log, message="RuntimeError: boom at a.py:9")
+
+
+def test_an_agent_crash_keeps_the_partial_scores_of_its_log():
+    """A crashed episode stored with the log of its steps up to the crash has, in the results
+    file, the RC, IS, infractions and duration the criteria had computed then (as the
+    leaderboard keeps them), status 'Failed - Agent crashed'; one without a log scores 0, 1, 0;
+    icrsumo's own records are not changed."""
+    import lb1_reference
+
+    # 81 steps: the ego centre at x = 40.25 (RC 40 %), a counted vehicle collision (0.6) and
+    # 5 m of route advance outside the lanes of the 40 m made (x 0.875 on IS)
+    log = _partial(81, events=(contact("collision_vehicle", 30, "veh1"),),
+                   outside=[1 if 20 < i <= 30 else 0 for i in range(81)])
+    crashed = replace(_crashed("r2", log.message), length=300.0)
+    recs = [rec("X", "r1", "noise", 0, 100, 100, 1.0), crashed, _crashed("r3", "ValueError: early at a.py:1")]
+    logs = {("X", "r2", "noise", 0, 7): log}
+    mine = leaderboard_checkpoint(recs, "X", "noise", KEY_POINTS, logs=_by_key(logs))
+    assert lb1_reference.differences(mine, lb1_reference.leaderboard_file(recs, KEY_POINTS, logs)) == []
+    r1, r2, r3 = mine["_checkpoint"]["records"]
+    res = LB1.score(log)
+    assert (res.rc, res.is_) == (40.0, pytest.approx(0.6 * 0.875))
+    assert r2["scores"] == {"score_route": res.rc, "score_penalty": res.is_, "score_composed": res.ds}
+    assert r2["status"] == "Failed - Agent crashed" and r2["meta"]["duration_game"] == 4.0
+    assert [len(r2["infractions"][k]) for k in ("collisions_vehicle", "outside_route_lanes")] == [1, 1]
+    assert sum(map(len, r2["infractions"].values())) == 2
+    assert r3["scores"] == {"score_route": 0.0, "score_penalty": 1.0, "score_composed": 0.0}
+    assert (mine["entry_status"], mine["eligible"]) == ("Finished with agent errors", True)
+    assert mine["_checkpoint"]["global_record"]["scores"]["score_route"] == pytest.approx((100 + 40 + 0) / 3)
+    assert mine["_checkpoint"]["global_record"]["meta"]["duration_game"] == 64.0
+    assert recs[1] == crashed  # the stored record keeps no scores
+    # rescored by rules that end the route inside the log (here 1.0's deviation: it left the
+    # route before the crash), the route has that ending's status, as compute_route_statistics
+    # gives it
+    off = _partial(0, xy=straight(40) + [(19.75, 0.5 * j) for j in range(1, 80)])
+    logs = {("X", "r2", "noise", 0, 7): off}
+    mine = leaderboard_checkpoint(recs, "X", "noise", KEY_POINTS, logs=_by_key(logs))
+    assert mine["_checkpoint"]["records"][1]["status"] == "Failed - Agent deviated from the route"
+    assert lb1_reference.differences(mine, lb1_reference.leaderboard_file(recs, KEY_POINTS, logs)) == []
+
+
 def test_exceptions_are_listed_only_when_a_route_failed():
     g = leaderboard_checkpoint([rec("X", "r1", "noise", 0, 100, 100, 1.0)], "X", "noise")["_checkpoint"][
         "global_record"]
@@ -317,12 +366,31 @@ def test_results_file_agrees_with_the_leaderboard_transcription(case):
         assert len(mine["_checkpoint"]["records"]) == 3 and mine["_checkpoint"]["global_record"]["scores"]
 
 
-def _random_record(rng: random.Random, route: str, k: int) -> EpisodeRecord:
-    """A consistent random record: its termination, RC, counted infractions and IS their product."""
+def _random_partial(rng: random.Random) -> EpisodeLog:
+    """A random agent crash's log on :data:`ROUTE`: straight on, or leaving it sideways, with
+    random contacts and steps outside the lanes (some of them end the route before the crash)."""
+    n = rng.randint(1, 260)
+    turn = rng.choice([n, rng.randint(0, n)])
+    x = 0.25 + 0.5 * turn
+    xy = straight(turn) + [(x, 0.5 * j) for j in range(1, n - turn + 1)]
+    events = [contact(rng.choice(["collision_vehicle", "collision_static", "collision_pedestrian"]),
+                      rng.randrange(n), rng.choice(["a", "b"])) for _ in range(rng.choice([0, 1, 3]))]
+    outside = [int(rng.random() < 0.2) for _ in range(n)]
+    return _partial(n, xy=xy, events=tuple(sorted(events, key=lambda e: e.t)), outside=outside)
+
+
+def _random_record(rng: random.Random, route: str, k: int, logs: dict | None = None) -> EpisodeRecord:
+    """A consistent random record: its termination, RC, counted infractions and IS their product;
+    an agent's crash may have a partial log (put in ``logs``)."""
     end = rng.choice(["completed", "route_deviation", "route_timeout", "agent_blocked", "stuck", "sim_error",
-                      "crash_agent", "crash_sim"])
+                      "crash_agent", "crash_sim", "crash_log"])
+    if end == "crash_log" and logs is not None:
+        logs[("X", route, "noise", k, 7)] = _random_partial(rng)
+        crashed = _crashed(route, "RuntimeError: boom at a.py:9")
+        return replace(crashed, k=k, length=round(rng.uniform(50, 900), 2))
     if end.startswith("crash"):
-        return _crashed(route, "SimulatorError: gone" if end == "crash_sim" else "KeyError: 'x' at a.py:1")
+        why = "SimulatorError: gone" if end == "crash_sim" else "KeyError: 'x' at a.py:1"
+        return replace(_crashed(route, why), k=k)
     rc = 100.0 if end == "completed" else rng.choice([0.0, 0.0, round(rng.uniform(0, 99), 4)])
     kinds = [("collision_pedestrian", 0.5), ("collision_vehicle", 0.6), ("collision_static", 0.65),
              ("red_light", 0.7), ("stop_sign", 0.8), ("outside_route_lanes", round(rng.uniform(0.1, 1), 6))]
@@ -341,8 +409,9 @@ def test_random_results_files_agree_with_the_leaderboard_transcription():
     rng = random.Random(47)
     for _ in range(500):
         routes = [f"r{i}" for i in range(rng.randint(1, 6))]
-        recs = [_random_record(rng, rid, k) for rid in routes for k in range(rng.randint(1, 2))]
+        logs: dict = {}
+        recs = [_random_record(rng, rid, k, logs) for rid in routes for k in range(rng.randint(1, 2))]
         key_points = {rid: [(rng.uniform(0, 500), rng.uniform(0, 500)) for _ in range(rng.randint(2, 5))]
                       for rid in routes if rng.random() < 0.7}
-        mine = leaderboard_checkpoint(recs, "X", "noise", key_points)
-        assert lb1_reference.differences(mine, lb1_reference.leaderboard_file(recs, key_points)) == []
+        mine = leaderboard_checkpoint(recs, "X", "noise", key_points, logs=_by_key(logs))
+        assert lb1_reference.differences(mine, lb1_reference.leaderboard_file(recs, key_points, logs)) == []

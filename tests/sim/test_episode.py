@@ -284,3 +284,70 @@ def test_only_agents_that_declare_it_get_the_route(quiet):
     assert RouteOracle.needs_route and not getattr(InstructionFollower, "needs_route", False)
     with Episode(sc, sets[0]) as ep:  # not privileged: no World view at all
         assert ep.start().world is None
+
+
+class Explodes(RouteOracle):
+    """The route-oracle until its decision ``after + 1``, which raises."""
+
+    name = "explodes"
+
+    def __init__(self, after: int) -> None:
+        super().__init__()
+        self.after = after
+
+    def reset(self, info) -> None:
+        super().reset(info)
+        self.n = 0
+
+    def act(self, obs) -> Action:
+        self.n += 1
+        if self.n > self.after:
+            raise RuntimeError(f"exploded on decision {self.n}")
+        return super().act(obs)
+
+
+class BreaksOnSecondCheck:
+    """An instruction guard that passes the first instruction and raises on the second."""
+
+    name = "breaks"
+    needs_plan = False
+
+    def reset(self, info) -> None:
+        self.n = 0
+
+    def check(self, text, context):
+        self.n += 1
+        if self.n == 2:
+            raise ValueError("guard broke")
+        return "pass"
+
+
+def test_a_crash_in_the_loop_keeps_the_log_up_to_the_last_step(quiet):
+    """The agent (or its guard) raises mid-episode: run_episode raises it again; drive_episode
+    returns it beside the log of the steps completed before it (the same steps as an episode
+    that goes on), ended agent_error with the error as its message."""
+    from icrsumo.results.logs import loads_log
+    from icrsumo.sim.episode import drive_episode
+
+    sc, sets = _load(quiet, "tiny", "tiny_005")
+    full = run_episode(sc, sets[0], RouteOracle())
+    with pytest.raises(RuntimeError, match="exploded on decision 41"):
+        run_episode(sc, sets[0], Explodes(40))
+    log, err = drive_episode(sc, sets[0], Explodes(40))
+    assert isinstance(err, RuntimeError) and str(err) == "exploded on decision 41"
+    n = 2 * 40 + 1  # decision 41 reads step 80 (a decision every 2nd step)
+    assert len(full.t) > n and log.agent == "explodes"
+    for col in ("t", "x", "y", "speed", "progress", "instruction", "outside"):
+        assert getattr(log, col) == getattr(full, col)[:n]
+    assert (log.termination, log.termination_t) == ("agent_error", log.t[-1])
+    assert log.message.startswith("RuntimeError: exploded on decision 41 at test_episode.py:")
+    stored = loads_log(dumps_log(log))  # stored and read back
+    assert dumps_log(stored) == dumps_log(log) and stored.termination == "agent_error"
+    r = score_episode(log)
+    assert 0 < r.rc < 100 and r.termination == "agent_error"
+    # a guard that raises on the second instruction: the steps before that check
+    log, err = drive_episode(sc, sets[0], RouteOracle(), guard=BreaksOnSecondCheck())
+    assert isinstance(err, ValueError) and log.termination == "agent_error"
+    assert 0 < len(log.t) < len(full.t) and log.t == full.t[:len(log.t)]
+    assert log.agent == "route-oracle+guard:breaks" and len(log.guard) == 1
+    assert log.message.startswith("ValueError: guard broke at test_episode.py:")
