@@ -57,6 +57,15 @@ less); the time per model call against a cache lookup, per episode with and with
 and the same run replayed from the response cache alone, checked byte for byte
 (:func:`llm_runs`).
 
+``--protocol langauto`` measures only a whole ICR protocol for one agent (LangAuto's three
+suites, the four families, K = 8, 2 workers: about half an hour on 2 cores; ``--suites``,
+``--routes N``, ``--k`` for less), profiled beside the route-oracle's run and bare SUMO: see
+``tools/benchmark_protocol.py``.
+
+``--guards`` measures only the instruction guards: each shipped guard's time per check and per
+episode on the tiny suite's instructions (``llm:smollm2`` on a server started here with 1 thread),
+and what it blocks: see ``tools/benchmark_guards.py``.
+
 ``benchmarks/closed_loop.py`` (the older closed-loop benchmark) now runs this script with
 ``--skip-eval``.
 """
@@ -662,7 +671,63 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--llm-routes", help="routes of the --llm runs (comma separated; default all)")
     ap.add_argument("--llm-k", type=int, default=8, help="K of the --llm runs (default 8)")
     ap.add_argument("--llm-keep", type=Path, metavar="DIR", help="copy the --llm run's out folder here")
+    from benchmark_protocol import PROTOCOLS
+    from benchmark_protocol import main as protocol_main
+    from benchmark_protocol import table as protocol_table
+
+    pr = ap.add_argument_group("--protocol: a whole ICR protocol for one agent, profiled "
+                               "(docs/performance.md)")
+    pr.add_argument("--protocol", choices=sorted(PROTOCOLS),
+                    help="only this: the protocol's runs (agent, route-oracle, bare SUMO) and their profile")
+    pr.add_argument("--suites", action="append",
+                    help="bundled suites of --protocol (comma separated, repeatable; default the protocol's)")
+    pr.add_argument("--routes", type=int, metavar="N", help="the first N routes of each suite (default all)")
+    pr.add_argument("--k", type=int, default=8, help="variants per family (default 8)")
+    pr.add_argument("--workers", type=int, default=2, help="workers of each run (default 2)")
+    pr.add_argument("--agent", default=DEFAULT_AGENT, help=f"the agent (default {DEFAULT_AGENT})")
+    gd = ap.add_argument_group("--guards: the time each guard adds (docs/guards.md)")
+    gd.add_argument("--guards", action="store_true",
+                    help="only this: each guard's time per check and per episode")
+    gd.add_argument("--guard", action="append", help="a guard to time (repeatable; default plan, text, "
+                    "text-learned, llm:smollm2)")
+    gd.add_argument("--guard-routes", help="tiny routes of --guards (comma separated; default all)")
+    gd.add_argument("--guard-k", type=int, default=8, help="variants per family of --guards (default 8)")
+    gd.add_argument("--guard-threads", type=int, default=1,
+                    help="threads of the llm:smollm2 server (default 1)")
+    gd.add_argument("--guard-run", type=Path, metavar="OUT",
+                    help="an evaluation's out folder whose guarded episode logs give the checks per episode")
     args = ap.parse_args(argv)
+    if args.guards:
+        from benchmark_guards import main as guards_main
+        from benchmark_guards import table as guards_table
+
+        from icrsumo.core.errors import InputError
+
+        try:
+            r = guards_main(args, lambda m: print(m, file=sys.stderr, flush=True))
+        except InputError as err:
+            print(f"benchmark: {err}", file=sys.stderr)
+            return 2
+        print(guards_table(r))
+        line = json.dumps({"guards": r}, sort_keys=True)
+        if args.json:
+            args.json.write_text(line + "\n", encoding="utf-8")
+        print(line)
+        return 0
+    if args.protocol:
+        from icrsumo.core.errors import InputError
+
+        try:
+            r = protocol_main(args, lambda m: print(m, file=sys.stderr, flush=True))
+        except InputError as err:
+            print(f"benchmark: {err}", file=sys.stderr)
+            return 2
+        print(protocol_table(r))
+        line = json.dumps({"protocol": r}, sort_keys=True)
+        if args.json:
+            args.json.write_text(line + "\n", encoding="utf-8")
+        print(line)
+        return 0
     if args.llm:
         with tempfile.TemporaryDirectory(prefix="icrsumo_bench_") as tmp:
             routes = tuple(args.llm_routes.split(",")) if args.llm_routes else None

@@ -20,7 +20,7 @@ from icrsumo.core.types import Intent
 from icrsumo.core.vocab import Verdict
 from icrsumo.instructions.intent import classify_intent
 
-from .base import GuardContext, GuardInfo, PlanStep, intent_fits
+from .base import GuardContext, GuardInfo, NavPlan, PlanStep, intent_fits
 
 #: m from a junction maneuver within which an instruction may already concern the next one
 AT_JUNCTION_M = 30.0
@@ -44,27 +44,32 @@ class PlanGuard:
         return None
 
     def check(self, text: str, context: GuardContext) -> tuple[Verdict, str]:
-        plan = context.plan
-        if not text.strip() or plan is None:
+        if not text.strip() or context.plan is None:
             return Verdict.PASS, ""
-        intent = classify_intent(text)
-        junctions = [s for s in plan.steps if not s.kind.startswith("lane_change")]
-        if intent in _TURNS:
-            if not junctions:
-                return Verdict.BLOCK, f"{intent}, but the route has no junction maneuver left"
-            near = junctions[:2] if junctions[0].distance < AT_JUNCTION_M else junctions[:1]
-            if any(_fits(intent, s) for s in near):
-                return Verdict.PASS, ""
-            s = junctions[0]
-            return Verdict.BLOCK, f"{intent}, but the plan goes {s.intent} in {max(s.distance, 0):.0f} m"
-        if intent in _LANES:
-            change = plan.next_lane_change()
-            if change is not None:
-                if change.intent == _OTHER_LANE[intent]:
-                    return Verdict.BLOCK, f"{intent}, but the route needs {change.intent} in " \
-                                          f"{max(change.distance, 0):.0f} m"
-                return Verdict.PASS, ""
-            turn = junctions[0].intent if junctions else Intent.FOLLOW
-            if turn in _LANES.values() and turn != _LANES[intent]:
-                return Verdict.BLOCK, f"{intent}, but the route turns {turn} next"
-        return Verdict.PASS, ""
+        return intent_ruling(classify_intent(text), context.plan)
+
+
+def intent_ruling(intent: Intent, plan: NavPlan) -> tuple[Verdict, str]:
+    """(verdict, reason) of an instruction that asks for ``intent`` where the navigation plan is
+    ``plan``: the ``plan`` guard's rule (module doc), whoever read the intent (the ``llm`` guard
+    has a language model read it)."""
+    junctions = [s for s in plan.steps if not s.kind.startswith("lane_change")]
+    if intent in _TURNS:
+        if not junctions:
+            return Verdict.BLOCK, f"{intent}, but the route has no junction maneuver left"
+        near = junctions[:2] if junctions[0].distance < AT_JUNCTION_M else junctions[:1]
+        if any(_fits(intent, s) for s in near):
+            return Verdict.PASS, ""
+        s = junctions[0]
+        return Verdict.BLOCK, f"{intent}, but the plan goes {s.intent} in {max(s.distance, 0):.0f} m"
+    if intent in _LANES:
+        change = plan.next_lane_change()
+        if change is not None:
+            if change.intent == _OTHER_LANE[intent]:
+                return Verdict.BLOCK, f"{intent}, but the route needs {change.intent} in " \
+                                      f"{max(change.distance, 0):.0f} m"
+            return Verdict.PASS, ""
+        turn = junctions[0].intent if junctions else Intent.FOLLOW
+        if turn in _LANES.values() and turn != _LANES[intent]:
+            return Verdict.BLOCK, f"{intent}, but the route turns {turn} next"
+    return Verdict.PASS, ""

@@ -8,7 +8,9 @@ repair)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import bisect
+import time
+from collections.abc import Callable, Sequence
 from functools import cached_property
 
 from icrsumo.core.errors import Field, InputError, short
@@ -155,3 +157,22 @@ class GuardedStream:
         if self.current >= 0:
             return self.texts[self.current], self.instr[self.current].id
         return (FALLBACK_TEXT if self.blocked else ""), -1
+
+
+def replay_checks(stream: GuardedStream,
+                  clock: Callable[[], float] = time.perf_counter) -> tuple[list[GuardDecision], list[float]]:
+    """The guard's decisions on ``stream``'s instructions as an episode that drives its whole
+    route asks for them, without SUMO, and the wall time of each check (s, by ``clock``): the
+    guard is reset, then each instruction that becomes active is checked once, in order, at its
+    trigger (route progress, m; time 0 s). An episode checks it a step later, up to a metre or
+    two further on, and stops checking where the episode ends. For measuring guards offline
+    (``tools/benchmark.py --guards``); evaluations run :class:`GuardedStream` inside the episode."""
+    stream.reset()
+    triggers = [ins.trigger for ins in stream.instr]
+    seconds = []
+    for progress in sorted(set(triggers)):
+        k = bisect.bisect_right(triggers, progress + 1e-9) - 1   # the episode's active instruction
+        t0 = clock()
+        stream.shown(k, 0.0, progress)
+        seconds.append(clock() - t0)
+    return list(stream.decisions), seconds
