@@ -63,9 +63,9 @@ def guard_markdown(doc: dict, escape=lambda s: s) -> str:
     repairs = any("on_block" in r for r in doc["rows"].values())
     lines = ["# Instruction guards", "",
              "Block rate on misleading = detection; on the goal-preserving families (" + _names(PRESERVING)
-             + ") = false blocks (ambiguity and correction apart). ΔDS against each row's own baseline; shrink = 1 - ΔDS guarded / ΔDS "
-             "unguarded; flips against the unguarded agent; loss: DS guarded - unguarded, Wilcoxon "
-             "signed-rank over routes, Holm over the row's families."
+             + ") = false blocks (ambiguity and correction apart). ΔDS against each row's own baseline; "
+             "shrink = 1 - ΔDS guarded / ΔDS unguarded; flips against the unguarded agent; loss: DS "
+             "guarded - unguarded, Wilcoxon signed-rank over routes, Holm over the row's families."
              + (" A repaired instruction is blocked too; its row says how many were repaired and the "
                 "repaired episodes' DS against the unguarded agent's on the same pairs." if repairs else ""),
              "",
