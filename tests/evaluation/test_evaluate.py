@@ -131,6 +131,8 @@ def test_report_rescores_from_the_logs_alone_to_the_same_numbers(reference, tmp_
     for name in ("config.json", "results.sqlite"):
         (copy / name).write_bytes((ref_out / name).read_bytes())
     (copy / "instructions").symlink_to(ref_out / "instructions")
+    # the routes' key points (the results files' route lengths) come from the folder's scenarios
+    (copy / "scenarios").symlink_to(ref_out / "scenarios")
     assert main(["report", str(copy), "--quiet", "--scoring", "lb1"]) == 0
     for name in ("summary.json", "results.md", "episodes.csv", "leaderboard/route-oracle_misleading.json"):
         assert (copy / name).read_bytes() == (ref_out / name).read_bytes(), name

