@@ -1,7 +1,8 @@
 """tools/guard_tradeoff.py (docs/guards.md's tables of guards and block policies): one line per
-guarded row of each folder, the executed misleading decisions read from attribution.md, the
+guarded row of each folder, the executed misleading decisions read from summary.json, the
 figure written, a folder without guard.json refused in one line."""
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -34,12 +35,11 @@ def _folder(path: Path) -> None:
                      _rec("a+guard:plan", r, "noise", k, 100.0, 2, int(k))]
     summary = summarize(recs, suite="t", seed=1, k=2, families=("noise", "misleading"))
     write_guard(guard_doc(summary, recs), path)
-    (path / "attribution.md").write_text(
-        "| Agent | Family | followed route | followed text | other | not reached | compliance % "
-        "| adherence % |\n"
-        "|---|---|---:|---:|---:|---:|---:|---:|\n"
-        "| a | misleading | 1 | 5 | 0 | 0 | 83.3 | 16.7 |\n"
-        "| a+guard:plan | misleading | 4 | 2 | 0 | 0 | 33.3 | 66.7 |\n")
+    # decision-level attribution of the misleading episodes, as summary.json holds it
+    decisions = {"a": {"followed_route": 1, "followed_text": 5, "other": 0, "not_reached": 0},
+                 "a+guard:plan": {"followed_route": 4, "followed_text": 2, "other": 0, "not_reached": 0}}
+    (path / "summary.json").write_text(json.dumps(
+        {"agents": {name: {"families": {"misleading": {"decisions": d}}} for name, d in decisions.items()}}))
 
 
 def test_one_line_per_guarded_row_and_the_figure(tmp_path):

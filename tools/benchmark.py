@@ -647,6 +647,24 @@ def targets(res: dict) -> dict:
     return out
 
 
+def _section(name: str, run, table, args) -> int:
+    """Run a section that stands alone (``--guards``, ``--protocol``): its table, then its JSON
+    line (also written to ``--json``); bad input is one line and exit status 2."""
+    from icrsumo.core.errors import InputError
+
+    try:
+        r = run(args, lambda m: print(m, file=sys.stderr, flush=True))
+    except InputError as err:
+        print(f"benchmark: {err}", file=sys.stderr)
+        return 2
+    print(table(r))
+    line = json.dumps({name: r}, sort_keys=True)
+    if args.json:
+        args.json.write_text(line + "\n", encoding="utf-8")
+    print(line)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -701,33 +719,9 @@ def main(argv: list[str] | None = None) -> int:
         from benchmark_guards import main as guards_main
         from benchmark_guards import table as guards_table
 
-        from icrsumo.core.errors import InputError
-
-        try:
-            r = guards_main(args, lambda m: print(m, file=sys.stderr, flush=True))
-        except InputError as err:
-            print(f"benchmark: {err}", file=sys.stderr)
-            return 2
-        print(guards_table(r))
-        line = json.dumps({"guards": r}, sort_keys=True)
-        if args.json:
-            args.json.write_text(line + "\n", encoding="utf-8")
-        print(line)
-        return 0
+        return _section("guards", guards_main, guards_table, args)
     if args.protocol:
-        from icrsumo.core.errors import InputError
-
-        try:
-            r = protocol_main(args, lambda m: print(m, file=sys.stderr, flush=True))
-        except InputError as err:
-            print(f"benchmark: {err}", file=sys.stderr)
-            return 2
-        print(protocol_table(r))
-        line = json.dumps({"protocol": r}, sort_keys=True)
-        if args.json:
-            args.json.write_text(line + "\n", encoding="utf-8")
-        print(line)
-        return 0
+        return _section("protocol", protocol_main, protocol_table, args)
     if args.llm:
         with tempfile.TemporaryDirectory(prefix="icrsumo_bench_") as tmp:
             routes = tuple(args.llm_routes.split(",")) if args.llm_routes else None

@@ -1,5 +1,5 @@
 """Compare guards and block policies across evaluation folders: one Markdown table per guarded
-row and one figure, from the folders' ``guard.json`` and ``attribution.md`` (no SUMO).
+row and one figure, from the folders' ``guard.json`` and ``summary.json`` (no SUMO).
 
     python tools/guard_tradeoff.py OUT [OUT ...] [--figure PNG]
 
@@ -7,7 +7,7 @@ Each OUT is an ``icrsumo evaluate`` folder with guarded rows (``--guard``; the t
 policies live in two folders, ``on_block`` being part of a folder's configuration). Printed, per
 guarded row: misleading instructions blocked, the misleading ΔDS unguarded → guarded and its
 shrink, the misleading decisions executed (the agent took the text's branch: decision-level
-attribution's "followed text") unguarded → guarded, false blocks on the goal-preserving families,
+attribution's ``followed_text``) unguarded → guarded, false blocks on the goal-preserving families,
 and the goal-preserving families with a significant loss. The figure has two panels: detection
 against false blocks per guard, and the misleading ΔDS shrink (mean over the guard's agents,
 bars from the lowest to the highest) against the mean DS change on the goal-preserving families,
@@ -18,24 +18,23 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 from pathlib import Path
 
 PRESERVING = ("baseline", "paraphrase", "noise", "timing", "distance", "notice")
 
 
 def executed(out: Path) -> dict[tuple[str, str], tuple[int, int]]:
-    """(row, family) -> (decisions that followed the text, decisions in all) from attribution.md's
-    decision table (columns: followed route, followed text, other, not reached)."""
+    """(row, family) -> (decisions that followed the text, decisions in all) from the folder's
+    summary.json (each row's decision-level attribution, ``decisions``)."""
     found: dict[tuple[str, str], tuple[int, int]] = {}
-    path = out / "attribution.md"
+    path = out / "summary.json"
     if not path.is_file():
         return found
-    for line in path.read_text(encoding="utf-8").splitlines():
-        cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if len(cells) >= 6 and all(re.fullmatch(r"\d+", c) for c in cells[2:6]):
-            nums = [int(c) for c in cells[2:6]]
-            found.setdefault((cells[0].replace("\\", ""), cells[1]), (nums[1], sum(nums)))
+    for name, a in json.loads(path.read_text(encoding="utf-8"))["agents"].items():
+        for fam, block in a.get("families", {}).items():
+            d = block.get("decisions")
+            if d:
+                found[(name, fam)] = (d["followed_text"], sum(d.values()))
     return found
 
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -149,15 +150,23 @@ def _ask_to_dict(a: Ask, i: int) -> dict[str, Any]:
             "answered": bool(a.answered), "instruction_id": int(a.instruction_id)}
 
 
+def _entries(rd: _LogChecker, raw: Any, name: str, fields: tuple[str, ...], flag: str
+             ) -> Iterator[tuple[str, dict]]:
+    """(place, entry) of the list ``raw`` under key ``name``: each entry an object with exactly
+    ``fields``, its ``flag`` true or false."""
+    rd.lst(raw, name)
+    for i, e in enumerate(raw):
+        at = f"{name}[{i}]"
+        if not isinstance(e, dict) or set(e) != set(fields):
+            raise rd.fail(at, f"expected an object with keys {', '.join(fields)}")
+        if not isinstance(e[flag], bool):
+            raise rd.fail(f"{at}.{flag}", f"expected true or false, got {short(e[flag])}")
+        yield at, e
+
+
 def _asks_from(rd: _LogChecker, raw: Any) -> tuple[Ask, ...]:
-    rd.lst(raw, "asks")
     out = []
-    for i, a in enumerate(raw):
-        at = f"asks[{i}]"
-        if not isinstance(a, dict) or set(a) != set(ASK_FIELDS):
-            raise rd.fail(at, f"expected an object with keys {', '.join(ASK_FIELDS)}")
-        if not isinstance(a["answered"], bool):
-            raise rd.fail(f"{at}.answered", f"expected true or false, got {short(a['answered'])}")
+    for at, a in _entries(rd, raw, "asks", ASK_FIELDS, "answered"):
         out.append(Ask(t=rd.number(a["t"], f"{at}.t"), progress=rd.number(a["progress"], f"{at}.progress"),
                        answered=a["answered"],
                        instruction_id=rd.integer(a["instruction_id"], f"{at}.instruction_id")))
@@ -200,14 +209,8 @@ def _guard_from(rd: _LogChecker, raw: Any) -> tuple[GuardDecision, ...]:
 
 
 def _calls_from(rd: _LogChecker, raw: Any) -> tuple[ModelCall, ...]:
-    rd.lst(raw, "model_calls")
     out = []
-    for i, c in enumerate(raw):
-        at = f"model_calls[{i}]"
-        if not isinstance(c, dict) or set(c) != set(CALL_FIELDS):
-            raise rd.fail(at, f"expected an object with keys {', '.join(CALL_FIELDS)}")
-        if not isinstance(c["valid"], bool):
-            raise rd.fail(f"{at}.valid", f"expected true or false, got {short(c['valid'])}")
+    for at, c in _entries(rd, raw, "model_calls", CALL_FIELDS, "valid"):
         out.append(ModelCall(
             t=rd.number(c["t"], f"{at}.t"),
             instruction_id=rd.integer(c["instruction_id"], f"{at}.instruction_id"),
