@@ -55,9 +55,11 @@ class RouteCompletionTest:
         self._percentage_route_completed = 0.0
         self.success = False
 
-    def update(self, loc) -> None:
+    def update(self, loc) -> str:
+        """The tick's status: the completing tick sets the test's SUCCESS but returns RUNNING;
+        the next one returns SUCCESS (and the route ends there)."""
         if self.success:
-            return
+            return "SUCCESS"
         n = len(self.route.points)
         for index in range(self._current_index, min(self._current_index + self.WINDOWS_SIZE + 1, n)):
             if _dot_passed(self.route, index, loc):
@@ -68,6 +70,7 @@ class RouteCompletionTest:
                 < self.DISTANCE_THRESHOLD:
             self.success = True
             self._percentage_route_completed = 100
+        return "RUNNING"
 
 
 class InRouteTest:
@@ -205,12 +208,12 @@ def score(log: EpisodeLog) -> dict:
                     red_lights += 1
                 elif e.kind == "stop_sign":
                     stops += 1
-        completion.update(loc)
+        status = completion.update(loc)
         lanes.update(loc, bool(log.outside[i] & 3))
         collisions.update(now, loc)
         in_route.update(loc)
         blocked.update(now, log.speed[i])
-        if completion.success:
+        if status == "SUCCESS":
             ended = "completed"
         elif in_route.failure:
             ended = "route_deviation"

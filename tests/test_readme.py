@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 import icrsumo
+from icrsumo.core.defaults import LOOP_VERSION
 from icrsumo.evaluation import EvalResult
 from icrsumo.world.convert import CONVERTER_VERSION
 from icrsumo.world.scenario import Scenario
@@ -76,7 +77,7 @@ def test_the_python_api_example_runs(tmp_path, converted, capsys):
     config = json.loads((out / "config.json").read_text())
     agents = config.pop("agents")
     assert config == {"run": "evaluate", "suite": "tiny", "seed": 2026, "k": 1, "traffic": "normal",
-                      "scoring": "lb1", "converter": CONVERTER_VERSION}
+                      "scoring": "lb1", "converter": CONVERTER_VERSION, "loop": LOOP_VERSION}
     assert {n: a["spec"] for n, a in agents.items()} == {"route-oracle": "route-oracle",
                                                          "instruction-follower": "instruction-follower"}
     assert all(a["fingerprint"].startswith("sha256:") for a in agents.values())

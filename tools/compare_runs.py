@@ -9,7 +9,14 @@ episode is listed with its old and new events of those kinds. Any other differen
 failure (exit status 1).
 
     python tools/compare_runs.py OLD_OUT NEW_OUT [--explained collision_static] [--json FILE]
-                                 [--roadside-causes]
+                                 [--roadside-causes] [--effect]
+
+``--effect`` instead prints what a change of the closed loop's rules did to a run (the same
+command run by two icrsumo versions, docs/scoring.md "Loop versions"): per agent and family,
+over the episodes done in both, the mean DS, RC and IS before → after, how many drove the same
+trajectory (the ego's logged x, y equal over the steps both logs hold), how many changed DS, and
+the penalised infractions Leaderboard 1.0 charges (static-layout collisions as CollisionTest
+counts them, red lights, stop signs) before → after; exit status 0.
 
 ``--roadside-causes`` classifies every roadside event that is in one run and not the other
 (no event of the other run within 0.5 s) from the ego's pose at that time on the route's
@@ -26,8 +33,10 @@ from __future__ import annotations
 import argparse
 import json
 import sqlite3
+import statistics
 import sys
 import zlib
+from collections import defaultdict
 from pathlib import Path
 
 REPORT_FILES = ("summary.json", "results.md", "results.csv", "results.tex", "episodes.csv")
@@ -178,6 +187,69 @@ def markdown(res: dict) -> str:
     return "\n".join(lines)
 
 
+#: the penalised kinds --effect counts
+KINDS = ("collision_static", "red_light", "stop_sign")
+
+
+def charged(log) -> dict[str, int]:
+    """Counts of the penalised static collisions, red lights and stop signs of one log."""
+    from icrsumo.scoring.lb1 import counted_collisions
+
+    out = dict.fromkeys(KINDS, 0)
+    for e in counted_collisions(log):
+        if e.kind == "collision_static":
+            out[e.kind] += 1
+    for e in log.events:
+        if e.kind in ("red_light", "stop_sign"):
+            out[e.kind] += 1
+    return out
+
+
+def _key(r) -> tuple[str, str, str, int, int]:
+    return r.agent, r.route_id, r.family, r.k, r.seed
+
+
+def effect(before: Path, after: Path) -> list[dict]:
+    """One row per (agent, family) with paired episodes (``--effect``)."""
+    from icrsumo.results.store import ResultStore
+
+    with ResultStore(before / "results.sqlite", readonly=True) as a, \
+            ResultStore(after / "results.sqlite", readonly=True) as b:
+        old = {_key(r): r for r in a.records() if r.status == "done"}
+        new = {_key(r): r for r in b.records() if r.status == "done"}
+        groups: dict[tuple[str, str], list] = defaultdict(list)
+        for key in sorted(old.keys() & new.keys()):
+            ra, rb = old[key], new[key]
+            la, lb = a.episode_log(*key), b.episode_log(*key)
+            n = min(len(la.x), len(lb.x))
+            same = la.x[:n] == lb.x[:n] and la.y[:n] == lb.y[:n]
+            groups[(ra.agent, ra.family)].append((ra, rb, same, charged(la), charged(lb)))
+    rows = []
+    for (agent, family), items in sorted(groups.items()):
+        row = {"agent": agent, "family": family, "n": len(items),
+               "same_path": sum(s for _, _, s, _, _ in items),
+               "ds_changed": sum(abs(ra.ds - rb.ds) > 1e-9 for ra, rb, _, _, _ in items)}
+        for col, attr in (("ds", "ds"), ("rc", "rc"), ("is", "is_")):
+            row[col] = (statistics.fmean(getattr(ra, attr) for ra, _, _, _, _ in items),
+                        statistics.fmean(getattr(rb, attr) for _, rb, _, _, _ in items))
+        for kind in KINDS:
+            row[kind] = (sum(ca[kind] for *_, ca, _ in items), sum(cb[kind] for *_, cb in items))
+        rows.append(row)
+    return rows
+
+def effect_markdown(rows: list[dict]) -> str:
+    """The ``--effect`` table."""
+    head = "| agent | family | n | same path | DS changed | DS | RC | IS | static | red light | stop sign |"
+    lines = [head, "|---|---|---:|---:|---:|---|---|---|---|---|---|"]
+    for r in rows:
+        ds, rc, is_ = r["ds"], r["rc"], r["is"]
+        kinds = " | ".join(f"{r[k][0]} → {r[k][1]}" for k in KINDS)
+        lines.append(f"| {r['agent']} | {r['family']} | {r['n']} | {r['same_path']} | {r['ds_changed']} | "
+                     f"{ds[0]:.1f} → {ds[1]:.1f} | {rc[0]:.1f} → {rc[1]:.1f} | "
+                     f"{is_[0]:.3f} → {is_[1]:.3f} | {kinds} |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("old", type=Path)
@@ -187,7 +259,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path, default=None, help="also write the full comparison here")
     ap.add_argument("--roadside-causes", action="store_true",
                     help="classify the roadside events found by one run only (needs the networks)")
+    ap.add_argument("--effect", action="store_true",
+                    help="print the per agent and family effect of a change of the loop's rules instead")
     args = ap.parse_args(argv)
+    if args.effect:
+        print(effect_markdown(effect(args.old, args.new)))
+        return 0
     res = compare(args.old, args.new, set(args.explained or ["collision_static"]))
     print(markdown(res))
     if args.roadside_causes:

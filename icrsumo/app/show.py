@@ -160,7 +160,8 @@ def _scenario(out: Path, cfg: dict, route: str):
 
 def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: Path | None = None,
                  spec: str | None = None) -> ShowResult:
-    """Re-simulate one stored episode of the evaluation folder ``out`` and write
+    """Re-simulate one stored episode of the evaluation folder ``out`` (a crashed one up to its
+    crash, where its log up to it was stored) and write
     ``dest/episode.webm`` (:class:`icrsumo.render.VideoWriter`: another container only where
     this OpenCV cannot write VP8) and ``dest/moment.png`` (:func:`failure_moment`)
     (default ``dest``: ``OUT/show/AGENT_ROUTE_FAMILY_K``). ``agent`` is the stored name; the
@@ -174,18 +175,19 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
     from icrsumo.render import write_image
     from icrsumo.results.decisions import classify_decisions
     from icrsumo.results.logs import dumps_log, loads_log
-    from icrsumo.sim.episode import RunOptions, run_episode
+    from icrsumo.sim.episode import RunOptions, drive_episode
 
     out = Path(out)
     cfg = read_config(out)
     scoring = str(cfg.get("scoring") or "lb1")
     with ResultStore(out / "results.sqlite", readonly=True) as store:  # a read-only folder is fine
         rec = _find(store, agent, route, family, k, int(cfg["seed"]))
-        if rec.status != EpisodeStatus.DONE:
-            raise InputError(out / "results.sqlite", f"episode {agent}/{route}/{family}/{k}",
-                             f"crashed ({rec.message[:120]}), so it has no log to replay",
-                             "rerun it with icrsumo evaluate --retry-crashed, then show it")
         stored_text = store.log(rec.agent, rec.route_id, rec.family, rec.k, rec.seed)
+        if rec.status != EpisodeStatus.DONE and stored_text is None:
+            raise InputError(out / "results.sqlite", f"episode {agent}/{route}/{family}/{k}",
+                             f"crashed before its first step ({rec.message[:120]}), so it has no log "
+                             "to replay",
+                             "rerun it with icrsumo evaluate --retry-crashed, then show it")
         stored_fp = store.episode_fingerprint(rec.agent, rec.route_id, rec.family, rec.k, rec.seed)
     if stored_text is None:
         raise InputError(out / "results.sqlite", f"episode {agent}/{route}/{family}/{k}", "has no stored log",
@@ -227,10 +229,11 @@ def show_episode(out: Path, agent: str, route: str, family: str, k: int, dest: P
         raise InputError(dest, "", f"cannot be made for the video and still ({err.strerror or err})",
                          "give a folder you can write to for them (dest)") from None
     recorder = _Recorder(dest / "episode.webm", moment_t)
-    log = run_episode(sc, iset, factory(), RunOptions(scoring=scoring, asking=cfg.get("asking") is True,
-                                                      on_block=on_block),
-                      callbacks=[recorder], guard=guards[1]() if guards is not None else None,
-                      baseline=sets.get(("baseline", 0)))
+    # a crashed episode stored with its log up to the crash is replayed up to the crash again
+    log, _ = drive_episode(sc, iset, factory(), RunOptions(scoring=scoring, asking=cfg.get("asking") is True,
+                                                           on_block=on_block),
+                           callbacks=[recorder], guard=guards[1]() if guards is not None else None,
+                           baseline=sets.get(("baseline", 0)))
     still = dest / "moment.png"
     if recorder.still is not None:
         write_image(still, recorder.still, f"t = {moment_t:.1f} s: {moment}")

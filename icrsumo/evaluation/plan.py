@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TypeVar
 
 from icrsumo.agents.base import Agent
+from icrsumo.core.defaults import LOOP_VERSION
 from icrsumo.core.errors import Field, InputError, check_seed, expect
 from icrsumo.core.fsio import OutFolder, dumps_json, read_json, write_atomic
 from icrsumo.core.resources import bundled_suites, suite_coords
@@ -117,10 +118,12 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None,
     With a ``--baseline-bank`` (``bank``: the file already loaded) the file's SHA-256 is part of
     it (its name is recorded too, but another path to the same bytes is the same
     configuration). With ``asking`` on, ``"asking": true`` is part of it (a folder without the
-    key was run without asking); so is a block policy other than keep (``"on_block"``)."""
+    key was run without asking); so is a block policy other than keep (``"on_block"``), and the
+    version of the closed loop's rules (``"loop"``, :data:`~icrsumo.core.defaults.LOOP_VERSION`;
+    a folder without the key holds version 1's)."""
     run = dict(run or {"run": "evaluate"})
     config = {**run, "suite": opts.suite, "seed": opts.seed, "k": opts.k, "traffic": opts.traffic,
-              "scoring": opts.scoring, "converter": CONVERTER_VERSION}
+              "scoring": opts.scoring, "converter": CONVERTER_VERSION, "loop": LOOP_VERSION}
     if opts.asking:
         config["asking"] = True
     if opts.on_block != "keep":
@@ -139,7 +142,9 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None,
             raise InputError(path, "", "is not a JSON object", restore)
         check_run(out, old, run)
         # a folder without the keys ran without asking, and kept what was shown before a block
-        stored = {**old, "asking": old.get("asking") is True, "on_block": old.get("on_block", "keep")}
+        # ... and one without "loop" was run by the loop's first rules (LOOP_VERSION)
+        stored = {**old, "asking": old.get("asking") is True, "on_block": old.get("on_block", "keep"),
+                  "loop": old.get("loop", 1)}
         diff = [k for k in compared if stored.get(k) != compared[k]]
         history = old.get("k_grown_from")
         grown = [x for x in history if isinstance(x, int)] if isinstance(history, list) else []
@@ -164,6 +169,10 @@ def check_config(out: Path, opts: EvalOptions, bank: BaselineBank | None = None,
                 fix = ("its scenarios were converted by an earlier icrsumo, whose background traffic "
                        "differs (docs/fidelity.md, class F), so new episodes would not be comparable: "
                        f"run again into another {Field('out')} folder")
+            elif "loop" in diff:
+                fix = ("its episodes were recorded by the closed loop's earlier rules (docs/scoring.md, "
+                       "loop versions), so new episodes would not be comparable: run again into "
+                       f"another {Field('out')} folder")
             elif "scoring" in diff and old.get("scoring") is None:
                 fix = ("its episodes were scored before icrsumo scored by the leaderboard's own rules: "
                        f"run them again into another {Field('out')} folder")

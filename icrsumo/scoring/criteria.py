@@ -11,7 +11,10 @@ says where 2.0 differs):
   (:class:`~icrsumo.scoring.route.DenseRoute`) passed (a point is passed when the ego is ahead
   of it along the route's direction there; 3 points are tried per tick), complete once that
   percentage is above 99 *and* the ego is less than 10 m (straight line) from the last route
-  point;
+  point; the test then reports success on the *next* tick (its ``update`` sets the status and
+  returns RUNNING; the following one returns SUCCESS), so the route ends one step after the
+  completing one, every criterion counting in that step (the others may still end it on the
+  completing step itself);
 * ``InRouteTest``: route deviation when the nearest of the next 6 dense points is 30 m or more
   away, or when the route advanced while the ego was 15 m or more from it exceeds 30 % of the
   route;
@@ -144,6 +147,7 @@ class TerminationMonitor:
         self._last_valid: float | None = None  # ActorSpeedAboveThresholdTest._time_last_valid_state
         self.completion_index = 0                # RouteCompletionTest._current_index
         self.completed = False
+        self._completion_reported = False        # the completing tick was seen: success on the next
         self._x = self._y = math.nan
         # InRouteTest
         self.in_route_index = 0
@@ -299,7 +303,9 @@ class TerminationMonitor:
                 if event_kind in kinds:
                     return kind
         if self.completed:
-            return Termination.COMPLETED
+            if self._completion_reported:
+                return Termination.COMPLETED
+            self._completion_reported = True  # RouteCompletionTest reports it on the next tick
         if self._deviated:
             return Termination.ROUTE_DEVIATION
         if blocked:
@@ -385,7 +391,10 @@ def cut_at_end(log: EpisodeLog, rules: RouteRules
     mon, end = run_monitor(log, rules)
     if end is None:
         off_rules = (Termination.SIM_ERROR, Termination.STUCK, Termination.AGENT_ERROR)
-        return log, log.termination in off_rules, mon
+        # a log of the loop's first rules ends on its completing step, one before the step on
+        # which completion is reported: it is scored as completed, as it was recorded
+        completed = log.termination == Termination.COMPLETED and mon is not None and mon.completed
+        return log, log.termination in off_rules or completed, mon
     kind, t = end
     n = bisect.bisect_right(log.t, t + EPS)
     if n >= len(log.t) and kind == log.termination:

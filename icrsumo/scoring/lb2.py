@@ -30,7 +30,7 @@ from .criteria import (
     TerminationMonitor,
     events_by_step,
 )
-from .leaderboard import LABELS, Logs, agent_records, record_infractions, route_name
+from .leaderboard import LABELS, Logs, agent_records, crash_scored, record_infractions, route_name
 from .penalties import MAX_ID_TIME, contacts
 
 #: Leaderboard 2.0's route criteria (scenario_runner's and leaderboard's 2.0 branches):
@@ -133,7 +133,8 @@ def _lb2_record(r: EpisodeRecord, index: int) -> dict:
     }
 
 
-def leaderboard_checkpoint_lb2(records: Iterable[EpisodeRecord], agent: str, family: str) -> dict:
+def leaderboard_checkpoint_lb2(records: Iterable[EpisodeRecord], agent: str, family: str,
+                               logs: Logs | None = None) -> dict:
     """The episodes of one agent and family as a CARLA Leaderboard 2.0 results file.
 
     Reproduces 2.0's ``statistics_manager.py`` (``compute_global_statistics``): statuses
@@ -143,8 +144,11 @@ def leaderboard_checkpoint_lb2(records: Iterable[EpisodeRecord], agent: str, fam
     route km, 0.001), except ``outside_route_lanes``, which is the km of route advance made off
     the lanes; the global status drops Perfect -> Completed -> Failed; ``entry_status``
     'Crashed' (not eligible) when a simulation crashed, else 'Finished'; ``duration_system`` is
-    -1 (not timed by wall clock)."""
-    mine = agent_records(records, agent, family)
+    -1 (not timed by wall clock). A crashed episode whose log of the steps up to the crash
+    ``logs`` holds has that log's RC, IS, DS and infractions by 2.0's rules (what its criteria
+    had computed when the agent crashed, as 2.0's ``compute_route_statistics`` keeps them),
+    status 'Failed - Agent crashed'; one without a log is scored as stored (RC 0, DS 0)."""
+    mine = crash_scored(agent_records(records, agent, family), logs, LB2.score)
     recs = [_lb2_record(r, i) for i, r in enumerate(mine)]
     n = len(recs)
     keys = ("score_composed", "score_route", "score_penalty")
@@ -223,8 +227,8 @@ class Leaderboard2(Scoring):
     def leaderboard_file(self, records: Iterable[EpisodeRecord], agent: str, family: str,
                          key_points: KeyPoints | None = None, logs: Logs | None = None) -> dict:
         """2.0's file (its route length is the interpolated route's: ``key_points`` is not used;
-        a crashed episode is scored as stored: ``logs`` is not used)."""
-        return leaderboard_checkpoint_lb2(records, agent, family)
+        a crashed episode with a partial log in ``logs`` is scored from it)."""
+        return leaderboard_checkpoint_lb2(records, agent, family, logs)
 
 
 #: the Leaderboard 2.0 rule set (registered as ``lb2`` by :mod:`icrsumo.scoring`)

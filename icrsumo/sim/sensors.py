@@ -3,15 +3,20 @@ network's geometry and SUMO's :class:`~icrsumo.sim.frame.SimFrame`. No libsumo, 
 
 * :func:`footprint_corners` / :func:`off_corners`: the ego's rectangle (m);
 * :class:`LaneHeading`: a lane's heading (rad) at a lane position;
+* :class:`StopLine`: the end of an approach lane, where its stop line lies;
 * :class:`Sensors.detect`: ``(state, frame, ego, pos) -> (events, state)``, the infraction
-  events of one step (a contact event per actor on every step of contact, for the
-  leaderboard's collision rule in :mod:`icrsumo.scoring`; roadside from the drivable area's
-  polygons (:mod:`icrsumo.sim.drivable`); red lights and stop signs at junction entry; wrong
-  way) and the step's OutsideRouteLanesTest flags (:mod:`icrsumo.sim.lanes`) in a frozen
-  :class:`SensorState`. Route progress is the run-ending monitor's
-  (:mod:`icrsumo.scoring.criteria`).
+  events of one step (a contact event per actor on every step of contact, the roadside too,
+  for the leaderboard's collision rule in :mod:`icrsumo.scoring`; roadside from the drivable
+  area's polygons (:mod:`icrsumo.sim.drivable`); red lights when the ego's tail crosses the
+  stop line, stop signs when the ego leaves the sign's trigger volume, as scenario_runner's
+  ``RunningRedLightTest`` and ``RunningStopTest`` judge them (branch leaderboard-1.0,
+  ``srunner/scenariomanager/scenarioatomics/atomic_criteria.py``); wrong way) and the step's
+  OutsideRouteLanesTest flags (:mod:`icrsumo.sim.lanes`) in a frozen :class:`SensorState`.
+  Route progress is the run-ending monitor's (:mod:`icrsumo.scoring.criteria`).
 
 Infractions come from the network and SUMO's state only, never from what the agent sees.
+:data:`~icrsumo.core.defaults.LOOP_VERSION` names these rules (with the monitor's); an out
+folder records it, so episodes detected by other rules are never mixed into one table.
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -31,11 +36,25 @@ from icrsumo.world.dynamics import EgoState
 from icrsumo.world.networks import RoadNet
 
 from .drivable import DrivableArea
-from .frame import NO_LIGHTS, SimFrame
+from .frame import SimFrame
 from .lanes import ALLOWED_OUT_DISTANCE_LB2, DrivingLanes, WrongLaneState, wrong_lane_step
 
-#: an approach to a stop sign counts as stopped below this speed (m/s) within this distance (m)
-STOP_SPEED, STOP_ZONE = 0.1, 15.0
+#: RunningStopTest: a stop counts below this speed (m/s) ...
+STOP_SPEED = 0.1
+#: ... on any step while the sign's trigger volume lies within the ego's horizon: its centre
+#: and the 20 lane points 1 m apart ahead of it (m)
+STOP_HORIZON_M = 20.0
+#: a stop sign's trigger volume: the last 0.9 lane widths (m) of the approach lane before its
+#: stop line (CARLA 0.9.10 generates a cube of 90 % of the lane width at the sign)
+STOP_VOLUME_LANE_WIDTHS = 0.9
+#: RunningRedLightTest: the ego's tail is the segment from 0.8 half-lengths behind its centre
+#: to a half-length + 1 m behind it ...
+TAIL_NEAR_HALF_LENGTHS, TAIL_FAR_EXTRA_M = 0.8, 1.0
+#: ... and an approach's stop line spans 0.4 lane widths either side of the lane's centre
+STOP_LINE_HALF_WIDTHS = 0.4
+#: m past the junction entry after which an approach whose stop line the tail never crossed
+#: (the ego drove out over the line's ends) is forgotten
+APPROACH_FORGET_M = 30.0
 #: wrong way: heading off the lane direction by more than this (rad)
 WRONG_WAY_RAD = math.radians(100.0)
 #: m past a junction entry after which SUMO's internal lane names the ego's movement (at the
@@ -45,15 +64,83 @@ MOVEMENT_KNOWN_M = 15.0
 
 @dataclass(frozen=True)
 class PendingLight:
-    """A junction entered at (``x``, ``y``) m while the lights of the movements from the
-    approach lane disagreed: ``red`` / ``not_red``, the edges those movements lead to. Light
-    ``tls``'s red is charged once the ego's own movement is known (:meth:`Sensors.detect`)."""
+    """A junction entered at (``x``, ``y``) m whose stop line the tail crossed while the lights
+    of the movements from the approach lane disagreed: ``red`` / ``not_red``, the edges those
+    movements lead to. Light ``key``'s red is charged once the ego's own movement is known
+    (:meth:`Sensors.detect`)."""
 
     x: float
     y: float
     tls: str
     red: frozenset[str]
     not_red: frozenset[str]
+    key: str = ""
+
+
+@dataclass(frozen=True)
+class Approach:
+    """A junction entered at (``x``, ``y``) m from signalised approach ``lane`` (light ``tls``)
+    whose stop line the ego's tail has not crossed yet."""
+
+    lane: str
+    x: float
+    y: float
+    tls: str
+
+
+@dataclass(frozen=True)
+class StopTarget:
+    """A stop sign whose trigger volume (at the end of approach ``lane``, junction ``node``) is
+    within the ego's horizon: whether the ego ``stopped`` since, and whether its centre was
+    ever inside the volume (``affected``)."""
+
+    lane: str
+    node: str
+    stopped: bool = False
+    affected: bool = False
+
+
+@dataclass(frozen=True)
+class StopLine:
+    """Where approach lane's stop line lies: the lane's end (``x``, ``y``) m, its direction there
+    (``ux``, ``uy``, a unit vector) and its ``width`` (m)."""
+
+    x: float
+    y: float
+    ux: float
+    uy: float
+    width: float
+
+    def before(self, x: float, y: float) -> float:
+        """How far (m) the point (``x``, ``y``) lies before the line, along the lane (< 0 past it)."""
+        return (self.x - x) * self.ux + (self.y - y) * self.uy
+
+    def crossed_by(self, ax: float, ay: float, bx: float, by: float) -> bool:
+        """Whether segment a-b meets the stop line: the segment across the lane at its end,
+        :data:`STOP_LINE_HALF_WIDTHS` lane widths either side of the centre."""
+        half = STOP_LINE_HALF_WIDTHS * self.width
+        nx, ny = -self.uy, self.ux
+        return _segments_meet(ax, ay, bx, by, self.x - half * nx, self.y - half * ny,
+                              self.x + half * nx, self.y + half * ny)
+
+
+def _segments_meet(ax: float, ay: float, bx: float, by: float,
+                   cx: float, cy: float, dx: float, dy: float) -> bool:
+    """Whether the closed segments a-b and c-d share a point (the leaderboard's
+    ``_is_vehicle_crossing_line`` asks shapely the same of two 2-D lines)."""
+    def side(px: float, py: float, qx: float, qy: float, rx: float, ry: float) -> float:
+        return (qx - px) * (ry - py) - (qy - py) * (rx - px)
+
+    d1, d2 = side(cx, cy, dx, dy, ax, ay), side(cx, cy, dx, dy, bx, by)
+    d3, d4 = side(ax, ay, bx, by, cx, cy), side(ax, ay, bx, by, dx, dy)
+    if ((d1 > 0 > d2) or (d1 < 0 < d2)) and ((d3 > 0 > d4) or (d3 < 0 < d4)):
+        return True
+
+    def on(px: float, py: float, qx: float, qy: float, rx: float, ry: float) -> bool:
+        return min(px, qx) <= rx <= max(px, qx) and min(py, qy) <= ry <= max(py, qy)
+
+    return ((d1 == 0 and on(cx, cy, dx, dy, ax, ay)) or (d2 == 0 and on(cx, cy, dx, dy, bx, by))
+            or (d3 == 0 and on(ax, ay, bx, by, cx, cy)) or (d4 == 0 and on(ax, ay, bx, by, dx, dy)))
 
 
 def footprint_corners(st: EgoState, size: tuple[float, float]) -> np.ndarray:
@@ -110,22 +197,24 @@ class SensorState:
     :data:`~icrsumo.scoring.criteria.WRONG_LANE` by Leaderboard 1.0's rules, ``OFF_LANES_LB2`` /
     ``WRONG_LANE_LB2`` by 2.0's; ``lane_state`` / ``lane_state_lb2``: the wrong-lane memories;
     ``speed_limit``: the speed limit (m/s) of the nearest driving lane;
-    ``prev_lane``: the last lane SUMO placed the ego on; ``stopped``: lanes whose stop zone the
-    ego stood in since it entered them; ``roadside`` / ``wrong``: footprint off the drivable
-    area / heading against SUMO's lane at this step; ``lights``: the states at this step of the
-    lights controlling the connections from ``prev_lane`` (the next step's red-light check);
-    ``pending``: a junction entry whose red light waits for the movement to be known."""
+    ``prev_lane``: the last lane SUMO placed the ego on; ``roadside`` / ``wrong``: footprint off
+    the drivable area / heading against SUMO's lane at this step; ``approach``: a signalised
+    junction entry whose stop line the tail has not crossed; ``pending``: a red light waiting
+    for the movement to be known; ``last_red``: the light (``tls|approach edge``) charged last,
+    which is not charged again until another one is; ``stop``: the stop sign in the ego's
+    horizon."""
 
     outside: int = 0
     lane_state: WrongLaneState = WrongLaneState()
     lane_state_lb2: WrongLaneState = WrongLaneState()
     speed_limit: float = 0.0
     prev_lane: str = ""
-    stopped: frozenset[str] = frozenset()
     roadside: bool = False
     wrong: bool = False
-    lights: Mapping[str, str] = field(default_factory=lambda: NO_LIGHTS)
+    approach: Approach | None = None
     pending: PendingLight | None = None
+    last_red: str = ""
+    stop: StopTarget | None = None
 
 
 class Sensors:
@@ -140,6 +229,8 @@ class Sensors:
         self.drivable, self.size = drivable, size
         self.heading = LaneHeading(net)
         self._tls_ahead: dict[str, tuple[str, ...]] = {}
+        self._stop_lines: dict[str, StopLine] = {}
+        self._stop_signs: dict[str, str] = {}
 
     def tls_ahead(self, lane: str) -> tuple[str, ...]:
         """Traffic lights of the connections from ``lane`` (none when it is junction-internal)."""
@@ -157,9 +248,123 @@ class Sensors:
 
     def lights_needed(self, state: SensorState, lane: str) -> tuple[str, ...]:
         """The lights whose states :meth:`detect` needs in the frame in which SUMO reports the
-        ego on ``lane`` ("" off every lane), after ``state``: those ahead of the lane it then
-        remembers."""
-        return self.tls_ahead(lane or state.prev_lane)
+        ego on ``lane`` ("" off every lane), after ``state``: the light of a junction entered
+        whose stop line the tail has not crossed, or entered in this frame (from
+        ``state.prev_lane``); none elsewhere."""
+        if state.approach is not None:
+            return (state.approach.tls,)
+        prev = state.prev_lane
+        if prev and not prev.startswith(":") and lane.startswith(":"):
+            return self.tls_ahead(prev)
+        return ()
+
+    def stop_line(self, lane: str) -> StopLine:
+        """The stop line at the end of normal lane ``lane``."""
+        got = self._stop_lines.get(lane)
+        if got is None:
+            shape = self.net.lane_shape[lane]
+            (x0, y0), (x1, y1) = shape[-2], shape[-1]
+            n = math.hypot(x1 - x0, y1 - y0) or 1.0
+            width = float(self.net.sumolib_net.getLane(lane).getWidth())
+            got = self._stop_lines[lane] = StopLine(float(x1), float(y1), (x1 - x0) / n, (y1 - y0) / n, width)
+        return got
+
+    def stop_sign(self, lane: str) -> str:
+        """The junction whose stop sign normal lane ``lane`` approaches ("" none): a connection
+        from the lane with SUMO's stop (``s``) or all-way stop (``w``) state."""
+        got = self._stop_signs.get(lane)
+        if got is None:
+            got = ""
+            if lane and not lane.startswith(":") and lane in self.net.lane_shape:
+                edge, _, idx = lane.rpartition("_")
+                i = int(idx)
+                if any(c.state in ("s", "w") for nxt in self.net.successors.get(edge, ())
+                       for c in self.net.connections[(edge, nxt)] if c.from_lane == i):
+                    got = self.net.edge_to_node.get(edge, "")
+            self._stop_signs[lane] = got
+        return got
+
+    def _conns(self, lane: str) -> list:
+        edge, _, idx = lane.rpartition("_")
+        i = int(idx)
+        return [c for nxt in self.net.successors.get(edge, ()) for c in self.net.connections[(edge, nxt)]
+                if c.from_lane == i]
+
+    def _tail(self, ego: EgoState) -> tuple[float, float, float, float]:
+        """The ego's tail segment (RunningRedLightTest's): near end, far end (m)."""
+        half = 0.5 * self.size[0]
+        c, s = math.cos(ego.yaw), math.sin(ego.yaw)
+        near, far = TAIL_NEAR_HALF_LENGTHS * half, half + TAIL_FAR_EXTRA_M
+        return ego.x - near * c, ego.y - near * s, ego.x - far * c, ego.y - far * s
+
+    def _red_light(self, state: SensorState, frame: SimFrame, ego: EgoState, t: float, pos: float,
+                   ev: list[Event]) -> tuple[Approach | None, PendingLight | None, str]:
+        """RunningRedLightTest over SUMO's signals: the approach, pending light and last charged
+        light after this step, a RED_LIGHT event appended to ``ev`` when one is charged."""
+        approach, pending, last = state.approach, state.pending, state.last_red
+        lane, prev = frame.lane, state.prev_lane
+        if approach is None and prev and not prev.startswith(":") and lane.startswith(":"):
+            entered = next((c for c in self._conns(prev) if c.via == lane), None)
+            if entered is not None and entered.tls:
+                approach = Approach(prev, ego.x, ego.y, entered.tls)
+        if approach is not None:
+            line = self.stop_line(approach.lane)
+            ax, ay, bx, by = self._tail(ego)
+            key = f"{approach.tls}|{approach.lane.rpartition('_')[0]}"
+            ahead = math.cos(ego.yaw) * line.ux + math.sin(ego.yaw) * line.uy > 0
+            if key != last and ahead and line.crossed_by(ax, ay, bx, by):
+                conns = self._conns(approach.lane)
+                red = {c.to_edge for c in conns if c.tls and self._red(frame.tl_states, c.tls, c.link_index)}
+                rest = {c.to_edge for c in conns if c.to_edge not in red}
+                if red and not rest:
+                    ev.append(Event(EventKind.RED_LIGHT, t, pos, approach.tls, ego.x, ego.y))
+                    last, approach = key, None
+                elif red:   # the movements from this lane disagree: wait to see which one it is
+                    pending = PendingLight(approach.x, approach.y, approach.tls, frozenset(red),
+                                           frozenset(rest), key)
+                    approach = None
+            if approach is not None and (line.before(bx, by) < 0.0 or math.hypot(
+                    ego.x - approach.x, ego.y - approach.y) > APPROACH_FORGET_M):
+                approach = None  # the whole tail passed the line (or the ego left it far behind)
+        if pending is not None and lane:
+            if not lane.startswith(":"):
+                to_edge = lane.rsplit("_", 1)[0]
+            elif math.hypot(ego.x - pending.x, ego.y - pending.y) >= MOVEMENT_KNOWN_M:
+                to_edge = self.net.via_edges.get(lane, ("", ""))[1]
+            else:
+                to_edge = None
+            if to_edge is not None:
+                if to_edge in pending.red and to_edge not in pending.not_red and pending.key != last:
+                    ev.append(Event(EventKind.RED_LIGHT, t, pos, pending.tls, ego.x, ego.y))
+                    last = pending.key
+                pending = None
+        return approach, pending, last
+
+    def _stop_sign(self, state: SensorState, frame: SimFrame, ego: EgoState, t: float, pos: float,
+                   ev: list[Event]) -> StopTarget | None:
+        """RunningStopTest over a trigger volume at the end of the approach lane: the stop sign
+        in the horizon after this step, a STOP_SIGN event appended to ``ev`` when the ego left
+        the horizon of a volume its centre entered without having stopped."""
+        lane, stop = frame.lane, state.stop
+        if stop is None:
+            node = self.stop_sign(lane)
+            if node and angle_diff(self.heading(lane, frame.lane_pos), ego.yaw) < 0.5 * math.pi:
+                line = self.stop_line(lane)
+                before = line.before(ego.x, ego.y)
+                if 0.0 <= before <= STOP_VOLUME_LANE_WIDTHS * line.width + STOP_HORIZON_M:
+                    return StopTarget(lane, node)
+            return None
+        line = self.stop_line(stop.lane)
+        before = line.before(ego.x, ego.y)
+        stopped = stop.stopped or ego.speed < STOP_SPEED
+        affected = stop.affected or 0.0 <= before <= STOP_VOLUME_LANE_WIDTHS * line.width
+        in_horizon = (0.0 <= before <= STOP_VOLUME_LANE_WIDTHS * line.width + STOP_HORIZON_M
+                      and (lane == stop.lane or not lane or lane.startswith(":")))
+        if in_horizon:
+            return StopTarget(stop.lane, stop.node, stopped, affected)
+        if affected and not stopped:
+            ev.append(Event(EventKind.STOP_SIGN, t, pos, stop.node, ego.x, ego.y))
+        return None
 
     def detect(self, state: SensorState, frame: SimFrame, ego: EgoState,
                pos: float) -> tuple[list[Event], SensorState]:
@@ -172,46 +377,13 @@ class Sensors:
         for c in frame.contacts:
             kind = EventKind.COLLISION_PEDESTRIAN if c.pedestrian else EventKind.COLLISION_VEHICLE
             ev.append(Event(kind, t, pos, c.other, ego.x, ego.y))
+        approach, pending, last_red = self._red_light(state, frame, ego, t, pos, ev)
+        stop = self._stop_sign(state, frame, ego, t, pos, ev)
         net = self.net
-        stopped = state.stopped
-        # stop-sign bookkeeping: stopped within the last STOP_ZONE m of a lane
-        if lane and not lane.startswith(":") and ego.speed < STOP_SPEED and \
-                net.lane_length.get(lane, 0.0) - lane_pos <= STOP_ZONE and lane not in stopped:
-            stopped = stopped | {lane}
-        prev = state.prev_lane
-        pending = state.pending
-        if prev and not prev.startswith(":") and lane.startswith(":"):
-            pending = None
-            edge = prev.rsplit("_", 1)[0]
-            idx = int(prev.rsplit("_", 1)[1])
-            conns = [c for nxt in net.successors.get(edge, ()) for c in net.connections[(edge, nxt)]
-                     if c.from_lane == idx]
-            entered = next((c for c in conns if c.via == lane), None)
-            if entered is not None and entered.tls:
-                red = {c.to_edge for c in conns if c.tls and self._red(state.lights, c.tls, c.link_index)}
-                rest = {c.to_edge for c in conns if c.to_edge not in red}
-                if red and not rest:
-                    ev.append(Event(EventKind.RED_LIGHT, t, pos, entered.tls, ego.x, ego.y))
-                elif red:   # the movements from this lane disagree: wait to see which one it is
-                    pending = PendingLight(ego.x, ego.y, entered.tls, frozenset(red), frozenset(rest))
-            elif entered is not None and entered.state in ("s", "w") and prev not in stopped:
-                ev.append(Event(EventKind.STOP_SIGN, t, pos, net.edge_to_node.get(edge, ""), ego.x, ego.y))
-        if pending is not None and lane:
-            if not lane.startswith(":"):
-                to_edge = lane.rsplit("_", 1)[0]
-            elif math.hypot(ego.x - pending.x, ego.y - pending.y) >= MOVEMENT_KNOWN_M:
-                to_edge = net.via_edges.get(lane, ("", ""))[1]
-            else:
-                to_edge = None
-            if to_edge is not None:
-                if to_edge in pending.red and to_edge not in pending.not_red:
-                    ev.append(Event(EventKind.RED_LIGHT, t, pos, pending.tls, ego.x, ego.y))
-                pending = None
-        if lane and lane != prev and not lane.startswith(":") and lane in stopped:
-            stopped = stopped - {lane}  # a fresh approach to this lane's end
-        # roadside: the footprint left the drivable area (two corners or more off it)
+        # roadside: the footprint off the drivable area (two corners or more off it), a contact
+        # with the static layout on every step of it (CollisionTest counts it again every 3 m)
         off = off_corners(ego, self.size, self.drivable.count_off) >= 2
-        if off and not state.roadside:
+        if off:
             ev.append(Event(EventKind.COLLISION_STATIC, t, pos, "roadside", ego.x, ego.y))
         # wrong way against SUMO's lane (recorded, never penalised)
         wrong = False
@@ -228,12 +400,8 @@ class Sensors:
         outside = ((OFF_LANES if self.lanes.off_lanes(point) else 0) | (WRONG_LANE if lane_state.wrong else 0)
                    | (OFF_LANES_LB2 if self.lanes.off_lanes(point, ALLOWED_OUT_DISTANCE_LB2) else 0)
                    | (WRONG_LANE_LB2 if lane_state2.wrong else 0))
-        prev_lane = lane or prev
-        # the lights the next step's red-light check reads: those ahead of prev_lane, now
-        tls = self.tls_ahead(prev_lane)
-        lights = {tl: frame.tl_states[tl] for tl in tls} if tls else NO_LIGHTS
-        return ev, SensorState(outside, lane_state, lane_state2, point.speed_limit, prev_lane, stopped, off,
-                               wrong, lights, pending)
+        return ev, SensorState(outside, lane_state, lane_state2, point.speed_limit, lane or state.prev_lane,
+                               off, wrong, approach, pending, last_red, stop)
 
     @staticmethod
     def _red(lights: Mapping[str, str], tls: str, link_index: int) -> bool:

@@ -92,3 +92,26 @@ def test_an_agent_crash_is_stored_with_its_partial_log_and_scored_by_the_leaderb
                           text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert "4 results files" in proc.stdout and "; 0 differ" in proc.stdout
+
+
+def test_show_replays_a_crashed_episode_up_to_its_crash(suite, tmp_path, capsys):
+    """``icrsumo show`` replays a crashed episode stored with its log up to the crash, byte for
+    byte, and says it crashed; one that crashed before its first step has nothing to replay."""
+    from icrsumo.app.cli.main import main
+
+    here = Path(__file__).resolve()
+    out = tmp_path / "o"
+    run_evaluation(EvalOptions(out=out, suite=str(suite), agents=(f"{here}:ExplodesAfter40",
+                                                                  f"{here}:ExplodesAtReset"),
+                               families=("noise",), k=1, quiet=True))
+    with ResultStore(out / "results.sqlite", readonly=True) as store:
+        route = next(r.route_id for r in store.records())
+    show = ["show", str(out), "--route", route, "--family", "baseline", "--agent"]
+    code = main([*show, "explodes-after-40", "--dir", str(tmp_path / "show")])
+    printed = capsys.readouterr()
+    assert code == 0, printed.err
+    printed = printed.out
+    assert "crashed: RuntimeError: exploded on decision 41" in printed
+    assert "reproduces the stored log byte for byte" in printed
+    code = main([*show, "explodes-at-reset", "--dir", str(tmp_path / "show2")])
+    assert code == 2 and "crashed before its first step" in capsys.readouterr().err

@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from icrsumo.app.cli.main import main
+from icrsumo.core.defaults import LOOP_VERSION
 from icrsumo.evaluation import EvalOptions, run_evaluation
 from icrsumo.evaluation.digests import DIGEST_RE, folder_digest
 from icrsumo.results.store import ResultStore
@@ -234,6 +235,25 @@ def test_a_folder_converted_by_an_earlier_icrsumo_is_not_resumed(reference, caps
         err = capsys.readouterr().err
         assert code == 2 and "converted by an earlier icrsumo" in err and "another --out" in err
         assert main(["report", str(ref_out), "--quiet"]) == 0  # stored results still report
+    finally:
+        (ref_out / "config.json").write_bytes(raw)
+
+
+def test_a_folder_of_the_loops_earlier_rules_is_not_resumed(reference, capsys):
+    """Episodes whose infractions the first sensors detected (roadside once per exit, red light
+    at the junction entry) would not pair with new ones; the stored results still report."""
+    ref_out, _ = reference
+    raw = (ref_out / "config.json").read_bytes()
+    cfg = json.loads(raw)
+    assert cfg["loop"] == LOOP_VERSION
+    (ref_out / "config.json").write_text(json.dumps({k: v for k, v in cfg.items() if k != "loop"}))
+    try:
+        code = main(["evaluate", "--out", str(ref_out), "--routes", ",".join(ROUTES), "--k", "2",
+                     "--agent", "route-oracle", "--agent", "instruction-follower", "--family", "misleading",
+                     "--family", "noise", "--quiet"])
+        err = capsys.readouterr().err
+        assert code == 2 and "loop=1 (now 2)" in err and "earlier rules" in err
+        assert main(["report", str(ref_out), "--quiet"]) == 0
     finally:
         (ref_out / "config.json").write_bytes(raw)
 

@@ -9,7 +9,7 @@ OutsideRouteLanesTest, ActorSpeedAboveThresholdTest, the route timeouts) under L
 from __future__ import annotations
 
 import pytest
-from hand_logs import DT, ROUTE, lb2_log, make_log, straight  # tests/ is on pytest's pythonpath
+from hand_logs import DT, ROUTE, contact, lb2_log, make_log, straight  # tests/ is on pytest's pythonpath
 
 from icrsumo.core.types import Event
 from icrsumo.scoring import score_episode
@@ -41,11 +41,26 @@ def test_constants_and_the_truncated_timeout():
 
 def test_completion_needs_more_than_99_percent_and_10_m():
     # 100 m route: RC > 99 % needs point 100 passed (x > 100: step 200, x = 100.25, t = 10.0),
-    # and the goal (100, 0) is then 0.25 m away; the old rule (99 % or 10 m) ended at x = 90
+    # and the goal (100, 0) is then 0.25 m away; the old rule (99 % or 10 m) ended at x = 90.
+    # RouteCompletionTest reports the success on the next tick: the route ends at t = 10.05
     log = make_log(straight(220), ((0.0, 0.0), (100.0, 0.0)), termination="completed")
     mon, end = lb1_monitor(log)
-    assert end == ("completed", 10.0)
+    assert end == ("completed", 10.05)
     assert mon.completion_pct == 100.0
+
+
+def test_the_tick_after_completion_counts_and_a_log_ending_on_the_completing_tick_scores_alike():
+    """The step after the completing one is part of the route: a collision in it is charged.
+    A log recorded by the loop's first rules (ending on the completing step) is scored as
+    completed, as it was recorded."""
+    route = ((0.0, 0.0), (100.0, 0.0))
+    hit = (contact("collision_vehicle", 201, "veh9"),)
+    log = make_log(straight(202), route, termination="completed", events=hit)
+    res = score_episode(log)
+    assert (res.termination, res.rc, res.is_) == ("completed", 100.0, 0.6)
+    old = make_log(straight(201), route, termination="completed")
+    assert ended_by(old, LB1.rules) == (old, True)
+    assert (score_episode(old).termination, score_episode(old).rc) == ("completed", 100.0)
 
 
 def test_finishing_5_m_short_of_the_end_is_not_completion():
@@ -98,7 +113,7 @@ def test_within_15_m_the_route_may_be_followed_off_centre():
     # 9 m off the centre line: never deviated, and the goal is 9.003 m away at x = 100.25 (< 10)
     _, end = lb1_monitor(make_log(straight(220, y=9.0), ((0.0, 0.0), (100.0, 0.0)),
                                   termination="completed"))
-    assert end == ("completed", 10.0)
+    assert end == ("completed", 10.05)  # reported on the tick after the completing one
     # 14.9 m off, stopping at x = 100.25: never deviated, but never within 10 m of the goal
     # either: the route times out
     xy = straight(201, y=14.9) + [(100.25, 14.9)] * 1501

@@ -81,3 +81,28 @@ def test_leaderboard_2_results_file():
     assert g["infractions"]["outside_route_lanes"] == 0.05
     assert len(cp["values"]) == len(cp["labels"]) == 15
     assert cp["entry_status"] == "Crashed" and cp["eligible"] is False
+
+
+def test_an_agent_crash_keeps_its_partial_scores_in_the_2_0_file():
+    """As in 1.0's file: a crashed episode stored with the log of its steps up to the crash has
+    the RC, IS and infractions 2.0's criteria had computed then; without a log, as stored."""
+    log = replace(lb2_log(straight(81), events=(contact("collision_vehicle", 30, "veh1"),),
+                          termination="agent_error"), message="RuntimeError: boom at a.py:9")
+    crashed = replace(rec("B", "r2", "noise", 0, status="crashed"), message=log.message)
+    bare = replace(rec("B", "r3", "noise", 0, status="crashed"), message="ValueError: early at a.py:1")
+    recs = [rec("B", "r1", "noise", 0, 100, 100, 1.0), crashed, bare]
+    logs = {("B", "r2", "noise", 0, 7): log}
+    cp = LB2.leaderboard_file(recs, "B", "noise", logs=lambda r: logs.get((r.agent, r.route_id, r.family, r.k,
+                                                                          r.seed)))
+    r1, r2, r3 = cp["_checkpoint"]["records"]
+    res = LB2.score(log)
+    assert res.rc == 40.0 and res.is_ == pytest.approx(0.6)
+    assert r2["status"] == "Failed - Agent crashed"
+    assert r2["scores"] == {"score_route": res.rc, "score_penalty": round(res.is_, 6),
+                           "score_composed": round(res.ds, 6)}
+    assert len(r2["infractions"]["collisions_vehicle"]) == 1
+    assert r3["status"] == "Failed - Agent crashed" and r3["scores"]["score_route"] == 0.0
+    assert cp["entry_status"] == "Finished"
+    # without the logs, as stored
+    plain = LB2.leaderboard_file(recs, "B", "noise")["_checkpoint"]["records"]
+    assert plain[1]["scores"]["score_route"] == 0.0

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from icrsumo.core.defaults import DEFAULT_AGENT
 from icrsumo.core.errors import InputError, visible
+from icrsumo.core.vocab import EpisodeStatus
 
 from .registry import Commands
 
@@ -45,8 +46,11 @@ def run(args: argparse.Namespace) -> int:
     res = show_episode(Path(args.out), args.agent or DEFAULT_AGENT, args.route, args.family, args.k,
                        Path(args.dir) if args.dir else None, spec=args.spec)
     r = res.record
-    print(f"{r.route_id} {visible(r.agent)} {r.family}:{r.k}  DS {r.ds:.1f}  RC {r.rc:.1f}  IS {r.is_:.3f}  "
-          f"{r.termination} ({r.termination_class})")
+    if r.status == EpisodeStatus.DONE:
+        print(f"{r.route_id} {visible(r.agent)} {r.family}:{r.k}  DS {r.ds:.1f}  RC {r.rc:.1f}  "
+              f"IS {r.is_:.3f}  {r.termination} ({r.termination_class})")
+    else:  # stored with its log up to the crash, unscored in the tables (docs/scoring.md)
+        print(f"{r.route_id} {visible(r.agent)} {r.family}:{r.k}  crashed: {visible(r.message[:160])}")
     print("the replay reproduces the stored log byte for byte" if res.identical else
           f"the replay does NOT reproduce the stored log: {res.difference}")
     print(f"video: {res.video}")
