@@ -59,6 +59,8 @@ class Job:
     on_block: str = "keep"
     #: the worker times the job's phases (``EvalOptions.profile``; the episode is the same)
     profile: bool = field(default=False, compare=False)
+    #: the route's length (m): how long the episode may take (:func:`longest_first`)
+    route_length: float = field(default=0.0, compare=False)
 
     @property
     def key(self) -> tuple[str, str, str, int, int]:
@@ -341,5 +343,12 @@ def plan_jobs(opts: EvalOptions, scenarios: Path, instr_dir: Path, names: Mappin
                     jobs.append(Job(spec, name, sc.route_id, fam, k, opts.seed, str(d), instr,
                                     device=opts.agent_device, scoring=opts.scoring, guard=guard,
                                     asking=opts.asking, on_block=opts.on_block if guard else "keep",
-                                    profile=opts.profile))
+                                    profile=opts.profile, route_length=sc.length))
     return jobs
+
+
+def longest_first(jobs: list[Job]) -> list[Job]:
+    """``jobs`` in the order the workers take them: the longest routes first (ties in the
+    planned order), so that no worker is left with a long episode while the others wait idle
+    at the end of a run. Each episode is the same whatever the order."""
+    return sorted(jobs, key=lambda j: -j.route_length)

@@ -31,7 +31,7 @@ from .backends import run_jobs
 from .inference import route_jobs, start_inference, stop_inference
 from .options import EvalOptions
 from .outputs import write_outputs
-from .plan import Job, no_routes, plan_jobs, prepare_suite, read_config, skip_reason
+from .plan import Job, longest_first, no_routes, plan_jobs, prepare_suite, read_config, skip_reason
 from .profile import ProfileSink, RunProfile
 from .progress import Progress
 
@@ -293,7 +293,7 @@ def _run_locked(opts: EvalOptions, factories: dict[str, Callable], guards: dict[
         if not written:
             raise no_routes(opts)
         have = store.keys(EpisodeStatus.DONE if opts.retry_crashed else None)
-        todo = [j for j in jobs if j.key not in have]
+        todo = longest_first([j for j in jobs if j.key not in have])
         with Progress(len(todo), opts.quiet) as progress:
             servers = start_inference(opts, todo, factories)
             try:
