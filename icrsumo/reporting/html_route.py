@@ -13,7 +13,7 @@ import numpy as np
 
 from icrsumo.core.types import EpisodeLog, EpisodeRecord, InstructionSet
 from icrsumo.core.vocab import Family
-from icrsumo.scoring.penalties import PENALTIES
+from icrsumo.scoring.lb1 import LB1
 
 from .trajectory import divergence_t, drawn_points
 
@@ -82,7 +82,7 @@ def _episode_svg(f: _Frame, rec: EpisodeRecord, log: EpisodeLog, out_kind: str, 
         out.append(f'<circle cx="{ex:.1f}" cy="{ey:.1f}" r="4" fill="{colour}"><title>{esc(label)} '
                    f'— ended at t = {log.t[-1]:.1f} s, {log.progress[-1]:.0f} m along the route'
                    '</title></circle>')
-    for ev in log.events:
+    for ev in LB1.penalised_events(log):  # a contact is logged on every step of it: those counted
         if ev.x or ev.y:
             cx, cy = f.at(ev.x, ev.y)
             out.append(f'<text x="{cx:.1f}" y="{cy:.1f}" font-size="12" fill="{colour}" '
@@ -175,7 +175,7 @@ def _episode_row(r: EpisodeRecord, kind: str, log: EpisodeLog | None, iset: Inst
         ended = str(r.termination)
     inf = "; ".join(f"{k} ×{f:g}" for k, f in r.infractions) or "—"
     if log is not None:  # when and where: the penalised events of the log
-        at = [f"{ev.kind} at t = {ev.t:.1f} s, {ev.pos:.0f} m" for ev in log.events if ev.kind in PENALTIES]
+        at = [f"{ev.kind} at t = {ev.t:.1f} s, {ev.pos:.0f} m" for ev in LB1.penalised_events(log)]
         if at:
             inf += " (" + "; ".join(at) + ")"
     return (f'<tr data-agent="{esc(r.agent)}" data-family="{esc(r.family)}" data-outcome="{kind}">'

@@ -10,8 +10,8 @@ import numpy as np
 
 from icrsumo.core.errors import visible
 from icrsumo.core.types import EpisodeLog, EpisodeRecord
-from icrsumo.core.vocab import EventKind
 from icrsumo.results.store import ResultStore
+from icrsumo.scoring.lb1 import LB1
 from icrsumo.world.convert import safe_name
 from icrsumo.world.scenario import find_scenarios, read_scenario
 
@@ -21,9 +21,6 @@ from .trajectory import divergence_t
 #: what the rollout figure writes where an episode ended
 _ENDED = {"completed": "done", "route_deviation": "route deviation", "route_timeout": "timeout",
           "agent_blocked": "blocked", "stuck": "stuck", "sim_error": "simulator error"}
-#: events the rollout figure marks (the penalised ones)
-_DRAWN_EVENTS = (EventKind.COLLISION_PEDESTRIAN, EventKind.COLLISION_VEHICLE, EventKind.COLLISION_STATIC,
-                 EventKind.RED_LIGHT, EventKind.STOP_SIGN)
 #: inches: the figure's width, the map's width and height, a caption line's height
 _FIG_W, _MAP_W, _MAP_H, _LINE_H = 7.5, 6.6, 5.6, 0.2
 
@@ -82,8 +79,10 @@ def _draw_trajectory(ax, label: str, log: EpisodeLog, colour) -> None:
     ax.plot(x[-1], y[-1], "X", color=colour, ms=8, zorder=4)
     ax.annotate(_ENDED.get(str(log.termination), str(log.termination)), (x[-1], y[-1]), xytext=(5, -10),
                 textcoords="offset points", fontsize=8, color=colour, zorder=5)
-    for ev in log.events:
-        if ev.kind in _DRAWN_EVENTS and (ev.x or ev.y):
+    # the penalised events (Leaderboard 1.0's): a contact is logged on every step of it, and
+    # only the collisions CollisionTest counts are marked
+    for ev in LB1.penalised_events(log):
+        if ev.x or ev.y:
             ax.plot(ev.x, ev.y, "*", color=colour, ms=11, mec="black", mew=0.5, zorder=5)
             ax.annotate(str(ev.kind).replace("_", " "), (ev.x, ev.y), xytext=(5, 4),
                         textcoords="offset points", fontsize=7, color=colour, zorder=5)

@@ -78,14 +78,19 @@ class Scoring(ABC):
         (:func:`~icrsumo.scoring.criteria.ended_by`)."""
         return ended_by(log, self.rules)
 
-    def penalised_infractions(self, log: EpisodeLog) -> tuple[Infraction, ...]:
-        """The penalised event infractions of ``log`` in time order: the collisions
-        :meth:`counted_collisions` counts, and every red-light and stop-sign event (the sensors
-        emit one per junction entry). Unknown event kinds raise ValueError."""
+    def penalised_events(self, log: EpisodeLog) -> list[Event]:
+        """The events of ``log`` these rules penalise, in time order: the collisions
+        :meth:`counted_collisions` counts (a contact is logged on every step of it), and every
+        red-light and stop-sign event (the sensors emit each once, as the leaderboard charges
+        it). Unknown event kinds raise ValueError."""
         check_event_kinds(log)
         chosen = self.counted_collisions(log) + [e for e in log.events if e.kind in RULE_EVENTS]
+        return sorted(chosen, key=lambda ev: ev.t)
+
+    def penalised_infractions(self, log: EpisodeLog) -> tuple[Infraction, ...]:
+        """:meth:`penalised_events` as infractions with their factors."""
         return tuple(Infraction(kind=EventKind(e.kind), factor=PENALTIES[e.kind], t=e.t, pos=e.pos,
-                                other=e.other) for e in sorted(chosen, key=lambda ev: ev.t))
+                                other=e.other) for e in self.penalised_events(log))
 
     def score(self, log: EpisodeLog) -> EpisodeResult:
         """The scores of one episode: the log replayed (and cut where these rules end it),

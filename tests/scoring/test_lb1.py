@@ -415,3 +415,15 @@ def test_random_results_files_agree_with_the_leaderboard_transcription():
                       for rid in routes if rng.random() < 0.7}
         mine = leaderboard_checkpoint(recs, "X", "noise", key_points, logs=_by_key(logs))
         assert lb1_reference.differences(mine, lb1_reference.leaderboard_file(recs, key_points, logs)) == []
+
+
+def test_a_sustained_scrape_is_charged_again_every_3_m():
+    """The sensors log a static-layout contact on every step off the drivable area; CollisionTest
+    (the static layout is never the remembered actor) charges it again once the ego is more
+    than 3 m from every place it charged: 10 m of scrape at 0.5 m a step, 3 charges."""
+    evs = tuple(contact("collision_static", i, "roadside") for i in range(20, 41))
+    log = make_log(straight(120), ROUTE, events=evs)
+    got = LB1.penalised_events(log)
+    assert [round(e.x, 2) for e in got] == [10.25, 13.75, 17.25]
+    assert [i.factor for i in LB1.penalised_infractions(log)] == [0.65] * 3
+    assert score_episode(log).is_ == pytest.approx(0.65 ** 3)
