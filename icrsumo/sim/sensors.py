@@ -27,6 +27,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
+import shapely
+from shapely.geometry import LineString
 
 from icrsumo.core.types import Event
 from icrsumo.core.vocab import EventKind
@@ -87,6 +89,12 @@ class Approach:
     y: float
     tls: str
 
+    @property
+    def key(self) -> str:
+        """The light as the leaderboard counts it once: the junction's signal and this approach
+        edge."""
+        return f"{self.tls}|{self.lane.rpartition('_')[0]}"
+
 
 @dataclass(frozen=True)
 class StopTarget:
@@ -117,30 +125,13 @@ class StopLine:
 
     def crossed_by(self, ax: float, ay: float, bx: float, by: float) -> bool:
         """Whether segment a-b meets the stop line: the segment across the lane at its end,
-        :data:`STOP_LINE_HALF_WIDTHS` lane widths either side of the centre."""
+        :data:`STOP_LINE_HALF_WIDTHS` lane widths either side of the centre (the leaderboard's
+        ``is_vehicle_crossing_line`` asks shapely the same of the two lines)."""
         half = STOP_LINE_HALF_WIDTHS * self.width
         nx, ny = -self.uy, self.ux
-        return _segments_meet(ax, ay, bx, by, self.x - half * nx, self.y - half * ny,
-                              self.x + half * nx, self.y + half * ny)
-
-
-def _segments_meet(ax: float, ay: float, bx: float, by: float,
-                   cx: float, cy: float, dx: float, dy: float) -> bool:
-    """Whether the closed segments a-b and c-d share a point (the leaderboard's
-    ``_is_vehicle_crossing_line`` asks shapely the same of two 2-D lines)."""
-    def side(px: float, py: float, qx: float, qy: float, rx: float, ry: float) -> float:
-        return (qx - px) * (ry - py) - (qy - py) * (rx - px)
-
-    d1, d2 = side(cx, cy, dx, dy, ax, ay), side(cx, cy, dx, dy, bx, by)
-    d3, d4 = side(ax, ay, bx, by, cx, cy), side(ax, ay, bx, by, dx, dy)
-    if ((d1 > 0 > d2) or (d1 < 0 < d2)) and ((d3 > 0 > d4) or (d3 < 0 < d4)):
-        return True
-
-    def on(px: float, py: float, qx: float, qy: float, rx: float, ry: float) -> bool:
-        return min(px, qx) <= rx <= max(px, qx) and min(py, qy) <= ry <= max(py, qy)
-
-    return ((d1 == 0 and on(cx, cy, dx, dy, ax, ay)) or (d2 == 0 and on(cx, cy, dx, dy, bx, by))
-            or (d3 == 0 and on(ax, ay, bx, by, cx, cy)) or (d4 == 0 and on(ax, ay, bx, by, dx, dy)))
+        dx, dy = half * nx, half * ny
+        line = LineString([(self.x - dx, self.y - dy), (self.x + dx, self.y + dy)])
+        return bool(shapely.intersects(LineString([(ax, ay), (bx, by)]), line))
 
 
 def footprint_corners(st: EgoState, size: tuple[float, float]) -> np.ndarray:
@@ -228,23 +219,25 @@ class Sensors:
         self.net, self.lanes = net, lanes
         self.drivable, self.size = drivable, size
         self.heading = LaneHeading(net)
-        self._tls_ahead: dict[str, tuple[str, ...]] = {}
+        self._conns_of: dict[str, tuple] = {}
         self._stop_lines: dict[str, StopLine] = {}
-        self._stop_signs: dict[str, str] = {}
 
-    def tls_ahead(self, lane: str) -> tuple[str, ...]:
-        """Traffic lights of the connections from ``lane`` (none when it is junction-internal)."""
-        got = self._tls_ahead.get(lane)
+    def _conns(self, lane: str) -> tuple:
+        """The connections from normal lane ``lane`` (none from a junction-internal one)."""
+        got = self._conns_of.get(lane)
         if got is None:
-            out: set[str] = set()
+            got = ()
             if lane and not lane.startswith(":"):
                 edge, _, idx = lane.rpartition("_")
                 i = int(idx)
-                for nxt in self.net.successors.get(edge, ()):
-                    out.update(c.tls for c in self.net.connections[(edge, nxt)]
-                               if c.tls and c.from_lane == i)
-            got = self._tls_ahead[lane] = tuple(sorted(out))
+                got = tuple(c for nxt in self.net.successors.get(edge, ())
+                            for c in self.net.connections[(edge, nxt)] if c.from_lane == i)
+            self._conns_of[lane] = got
         return got
+
+    def tls_ahead(self, lane: str) -> tuple[str, ...]:
+        """Traffic lights of the connections from ``lane`` (none when it is junction-internal)."""
+        return tuple(sorted({c.tls for c in self._conns(lane) if c.tls}))
 
     def lights_needed(self, state: SensorState, lane: str) -> tuple[str, ...]:
         """The lights whose states :meth:`detect` needs in the frame in which SUMO reports the
@@ -272,23 +265,9 @@ class Sensors:
     def stop_sign(self, lane: str) -> str:
         """The junction whose stop sign normal lane ``lane`` approaches ("" none): a connection
         from the lane with SUMO's stop (``s``) or all-way stop (``w``) state."""
-        got = self._stop_signs.get(lane)
-        if got is None:
-            got = ""
-            if lane and not lane.startswith(":") and lane in self.net.lane_shape:
-                edge, _, idx = lane.rpartition("_")
-                i = int(idx)
-                if any(c.state in ("s", "w") for nxt in self.net.successors.get(edge, ())
-                       for c in self.net.connections[(edge, nxt)] if c.from_lane == i):
-                    got = self.net.edge_to_node.get(edge, "")
-            self._stop_signs[lane] = got
-        return got
-
-    def _conns(self, lane: str) -> list:
-        edge, _, idx = lane.rpartition("_")
-        i = int(idx)
-        return [c for nxt in self.net.successors.get(edge, ()) for c in self.net.connections[(edge, nxt)]
-                if c.from_lane == i]
+        if lane in self.net.lane_shape and any(c.state in ("s", "w") for c in self._conns(lane)):
+            return self.net.edge_to_node.get(lane.rpartition("_")[0], "")
+        return ""
 
     def _tail(self, ego: EgoState) -> tuple[float, float, float, float]:
         """The ego's tail segment (RunningRedLightTest's): near end, far end (m)."""
@@ -310,7 +289,7 @@ class Sensors:
         if approach is not None:
             line = self.stop_line(approach.lane)
             ax, ay, bx, by = self._tail(ego)
-            key = f"{approach.tls}|{approach.lane.rpartition('_')[0]}"
+            key = approach.key
             ahead = math.cos(ego.yaw) * line.ux + math.sin(ego.yaw) * line.uy > 0
             if key != last and ahead and line.crossed_by(ax, ay, bx, by):
                 conns = self._conns(approach.lane)

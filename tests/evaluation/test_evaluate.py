@@ -219,41 +219,28 @@ def test_another_scoring_is_another_configuration(reference, capsys):
         (ref_out / "config.json").write_bytes(raw)
 
 
-def test_a_folder_converted_by_an_earlier_icrsumo_is_not_resumed(reference, capsys):
-    """Scenarios of an earlier converter (before the background fleet was capped, or before
-    background drivers grew impatient) hold other traffic: new episodes would not pair with the
-    stored ones."""
+@pytest.mark.parametrize(("key", "now", "said"), [
+    # scenarios of an earlier converter (before the background fleet was capped, or before
+    # background drivers grew impatient) hold other traffic
+    ("converter", CONVERTER_VERSION, ("converted by an earlier icrsumo", "another --out")),
+    # episodes of the loop's first rules (roadside once per exit, red light at the junction entry)
+    ("loop", LOOP_VERSION, (f"loop=1 (now {LOOP_VERSION})", "earlier rules", "another --out")),
+])
+def test_a_folder_of_an_earlier_converter_or_loop_is_not_resumed(reference, capsys, key, now, said):
+    """New episodes would not pair with the stored ones: the run is refused in one line; the
+    stored results still report."""
     ref_out, _ = reference
     raw = (ref_out / "config.json").read_bytes()
     cfg = json.loads(raw)
-    assert cfg["converter"] == CONVERTER_VERSION
-    (ref_out / "config.json").write_text(json.dumps({k: v for k, v in cfg.items() if k != "converter"}))
+    assert cfg[key] == now
+    (ref_out / "config.json").write_text(json.dumps({k: v for k, v in cfg.items() if k != key}))
     try:
         code = main(["evaluate", "--out", str(ref_out), "--routes", ",".join(ROUTES), "--k", "2",
                      "--agent", "route-oracle", "--agent", "instruction-follower", "--family", "misleading",
                      "--family", "noise", "--quiet"])
         err = capsys.readouterr().err
-        assert code == 2 and "converted by an earlier icrsumo" in err and "another --out" in err
+        assert code == 2 and all(words in err for words in said), err
         assert main(["report", str(ref_out), "--quiet"]) == 0  # stored results still report
-    finally:
-        (ref_out / "config.json").write_bytes(raw)
-
-
-def test_a_folder_of_the_loops_earlier_rules_is_not_resumed(reference, capsys):
-    """Episodes whose infractions the first sensors detected (roadside once per exit, red light
-    at the junction entry) would not pair with new ones; the stored results still report."""
-    ref_out, _ = reference
-    raw = (ref_out / "config.json").read_bytes()
-    cfg = json.loads(raw)
-    assert cfg["loop"] == LOOP_VERSION
-    (ref_out / "config.json").write_text(json.dumps({k: v for k, v in cfg.items() if k != "loop"}))
-    try:
-        code = main(["evaluate", "--out", str(ref_out), "--routes", ",".join(ROUTES), "--k", "2",
-                     "--agent", "route-oracle", "--agent", "instruction-follower", "--family", "misleading",
-                     "--family", "noise", "--quiet"])
-        err = capsys.readouterr().err
-        assert code == 2 and "loop=1 (now 2)" in err and "earlier rules" in err
-        assert main(["report", str(ref_out), "--quiet"]) == 0
     finally:
         (ref_out / "config.json").write_bytes(raw)
 
