@@ -70,7 +70,10 @@ class Observation:
     text with placeholders filled (and its id, -1 before the first), and the active
     ``notice`` ("" if none). ``world`` is set only for privileged agents. ``answer``: the
     instruction is the navigator's answer to the agent's ask (its id then that of the baseline
-    instruction it quotes), shown from its arrival until the next instruction is triggered."""
+    instruction it quotes), shown from its arrival until the next instruction is triggered.
+    ``compass``: the ego's heading (rad, counter-clockwise from the map's x axis, in [-pi, pi]),
+    the IMU compass of the leaderboard's sensor suite (the loop always sets it; 0 in
+    observations built by hand)."""
 
     t: float
     bev: np.ndarray
@@ -80,6 +83,7 @@ class Observation:
     notice: str
     world: World | None = None
     answer: bool = False
+    compass: float = 0.0
 
 
 @dataclass(frozen=True)

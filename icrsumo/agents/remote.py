@@ -16,8 +16,9 @@ request                body                                        answer (200)
 ``POST /reset``        ``session`` (client-chosen id), ``info``     ``{}``: a fresh agent instance for
                        (EpisodeInfo fields)                        the session, reset with ``info``
 ``POST /act``          ``session``, ``obs``: ``t``, ``bev``         ``action``: ``{"control": {"steer",
-                       (array), ``speed``, ``instruction``,         "throttle", "brake"}}`` or
-                       ``instruction_id``, ``notice``              ``{"waypoints": array,
+                       (array), ``speed``, ``compass``,             "throttle", "brake"}}`` or
+                       ``instruction``, ``instruction_id``,        ``{"waypoints": array,
+                       ``notice``
                                                                    "target_speed": number | null}``
 ``POST /close``        ``session``                                 ``{}``: the session's agent is dropped
 =====================  ==========================================  ==================================
@@ -26,7 +27,9 @@ Asking for clarification travels as three optional booleans, sent only when true
 messages without them are those of before and either side may be older: ``info.asking`` (the
 navigator answers asks in this episode), ``obs.answer`` (the instruction is the navigator's
 answer) and ``action.ask`` (the agent asks). A peer that does not know them ignores them (an
-agent behind an older server never asks; an older client never answers).
+agent behind an older server never asks; an older client never answers). ``obs.compass`` (the
+ego's heading in radians, :attr:`icrsumo.agents.base.Observation.compass`) is sent by every
+client since issue 47; an older client's observations read it as 0.
 
 Any other status carries ``{"error": "..."}`` in plain words (400 malformed request, 404
 unknown path or session, 422 the agent's action broke the protocol, 500 the agent raised). The
@@ -154,6 +157,7 @@ def decode_info(d: Any) -> EpisodeInfo:
 
 def encode_obs(obs: Observation) -> dict[str, Any]:
     return {"t": float(obs.t), "bev": encode_array(obs.bev), "speed": float(obs.speed),
+            "compass": float(obs.compass),
             "instruction": obs.instruction, "instruction_id": int(obs.instruction_id), "notice": obs.notice,
             **({"answer": True} if obs.answer else {})}
 
@@ -167,6 +171,7 @@ def decode_obs(d: Any) -> Observation:
             raise ProtocolError("obs.instruction_id must be an integer")
         return Observation(t=_number(d["t"], "obs.t"), bev=decode_array(d["bev"], "obs.bev"),
                            speed=_number(d["speed"], "obs.speed"),
+                           compass=_number(d.get("compass", 0.0), "obs.compass"),
                            instruction=_string(d["instruction"], "obs.instruction"), instruction_id=iid,
                            notice=_string(d["notice"], "obs.notice"), answer=_flag(d, "answer", "obs.answer"))
     except KeyError as err:

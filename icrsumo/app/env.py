@@ -10,7 +10,9 @@ Observation (``Dict``): ``bev`` (7, 128, 128) uint8 raster (channels of
 ``notice`` texts (``gymnasium.spaces.Text`` over printable ASCII plus every character of the
 route's instruction file, at most ``max_text_length`` characters, "" when none is active; or,
 with ``text_space="bytes"``, (max_text_length,) uint8 UTF-8 bytes padded with zeros, for
-libraries without Text support).
+libraries without Text support). Every ``info`` also carries ``t`` (s), ``instruction_id`` and
+``compass`` (the ego's heading, rad, counter-clockwise from the map's x axis: the IMU compass
+that the learned agents' instruction memory reads).
 
 Action: ``action_type="control"`` (default): Box [steer, throttle, brake] in [-1, 1] x [0, 1]
 x [0, 1]; ``"waypoints"``: Box (n_waypoints, 2) m in the ego frame (x forward, y left, 0.5 s
@@ -81,7 +83,7 @@ ENV_ID = "icrsumo/ICRDrive-v0"
 
 def to_observation(obs: dict[str, Any], info: dict[str, Any]) -> Observation:
     """The agent protocol's :class:`Observation` of an environment observation and the
-    ``info`` that came with it (``t``, ``instruction_id``): what ``agent.act`` takes, so any
+    ``info`` that came with it (``t``, ``instruction_id``, ``compass``): what ``agent.act`` takes, so any
     icrsumo agent drives the environment (``agent.reset(info["episode_info"])`` after
     ``env.reset()``; ``env.agent_action(agent.act(...))`` as the step's action)."""
     def text(v: Any) -> str:
@@ -92,7 +94,7 @@ def to_observation(obs: dict[str, Any], info: dict[str, Any]) -> Observation:
     return Observation(t=float(info["t"]), bev=np.asarray(obs["bev"]),
                        speed=float(np.asarray(obs["speed"])[0]), instruction=text(obs["instruction"]),
                        instruction_id=int(info["instruction_id"]), notice=text(obs["notice"]),
-                       answer=bool(info.get("answer", False)))
+                       answer=bool(info.get("answer", False)), compass=float(info.get("compass", 0.0)))
 
 
 #: the keys ``reset(options=...)`` reads
@@ -319,7 +321,8 @@ class ICRDriveEnv(gym.Env):
         info = {"route_id": self.scenario.route_id, "town": self.scenario.town, "family": iset.family,
                 "k": iset.k, "route_length": self._episode.route.length,
                 "control_dt": self._episode.info.control_dt, "t": obs.t, "instruction_id": obs.instruction_id,
-                "net": str(self.scenario.net), "episode_info": self._episode.info, **self._asking_info(obs)}
+                "compass": obs.compass, "net": str(self.scenario.net), "episode_info": self._episode.info,
+                **self._asking_info(obs)}
         return self._observe(obs), info
 
     def step(self, action: Any):
@@ -348,7 +351,7 @@ class ICRDriveEnv(gym.Env):
         self._out_prev = out_m
         seen = obs if obs is not None else self._obs  # at the end, the last observation stands
         info: dict[str, Any] = {"t": seen.t, "progress": ep.progress, "route_length": ep.route.length,
-                                "instruction_id": seen.instruction_id,
+                                "instruction_id": seen.instruction_id, "compass": seen.compass,
                                 "infractions_so_far": len(infractions), **self._asking_info(seen)}
         terminated = truncated = False
         if obs is None:

@@ -6,10 +6,13 @@ stop decision sets the target speed to 0. An exact checkpoint (``.npz``) runs in
 :class:`icrsumo.learn.exact.model.ExactPolicy` (numpy, the same bits on every CPU, no torch); a
 float one (``.pt``, read with ``weights_only=True``) in :class:`icrsumo.learn.nets.policy.Policy`
 (ONNX Runtime or torch: the ``train`` extra), where the stop decision is a stop probability
-above 0.5. Its only memory is the time it has been stopped
-(:class:`icrsumo.learn.labels.StopClock`). ``act_batch`` runs several episodes' observations in
-one forward pass per checkpoint, device and runtime (:func:`act_batch`, used by batched serving). The
-inference device is a constructor argument (``device``: cpu by default, cuda, cuda:N, auto).
+above 0.5. It remembers the time it has been stopped (:class:`icrsumo.learn.labels.StopClock`)
+and, with ``memory`` on (the default), what it has done under the active instruction: the turn or
+lane change already driven, the distance come since it arrived
+(:class:`icrsumo.learn.memory.InstructionMemory`, which chooses the text the network reads).
+``act_batch`` runs several episodes' observations in one forward pass per checkpoint, device and
+runtime (:func:`act_batch`, used by batched serving). The inference device is a constructor
+argument (``device``: cpu by default, cuda, cuda:N, auto).
 
 Shipped checkpoints live in ``icrsumo/learn/checkpoints/<name>.npz`` (exact, what the agents
 run) beside the float ``<name>.pt`` they were made from, a model card ``<name>.md`` and the
@@ -31,6 +34,7 @@ from icrsumo.agents.base import Action, EpisodeInfo, Observation
 from icrsumo.core.errors import InputError
 
 from .labels import StopClock
+from .memory import InstructionMemory
 
 CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
 _FIX = ("give the path of a model.pt written by icrsumo train (or its exact .npz), or a shipped agent "
@@ -88,26 +92,36 @@ def checkpoint_path(checkpoint: str | Path) -> Path:
 class LearnedAgent:
     """A non-privileged agent around a checkpoint (``checkpoint``: a path) whose network runs
     on ``device`` (cpu, cuda, cuda:N, auto); on the CPU in ``runtime`` ``onnx`` (ONNX Runtime,
-    the default) or ``torch`` (:class:`icrsumo.learn.nets.policy.Policy`)."""
+    the default) or ``torch`` (:class:`icrsumo.learn.nets.policy.Policy`). ``memory``: the
+    network reads the text :class:`icrsumo.learn.memory.InstructionMemory` chooses (True, the
+    default) or the active instruction as it stands (False: the agents before issue 47)."""
 
     name = "learned"
     privileged = False
     checkpoint: str = ""
 
     def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu",
-                 runtime: str = "onnx") -> None:
+                 runtime: str = "onnx", memory: bool = True) -> None:
         path = checkpoint_path(checkpoint or self.checkpoint)
         self.path, self.device, self.runtime = str(path), device, runtime
+        self.memory = bool(memory)
         self.policy = _policy(self.path, device, runtime)
         self.clock = StopClock()
+        self.recall, self.dt = InstructionMemory(), 0.1
 
     def reset(self, info: EpisodeInfo) -> None:
         self.clock = StopClock()
+        self.recall, self.dt = InstructionMemory(), float(info.control_dt)
+
+    def read(self, obs: Observation) -> str:
+        """The text the network reads at this step (call once per step): the instruction memory's
+        choice, or the active instruction itself with ``memory`` off."""
+        return self.recall.text(obs, self.dt) if self.memory else obs.instruction
 
     def act(self, obs: Observation) -> Action:
         # one observation: act_batch without the grouping (the same policy call, bitwise)
         stopped = self.clock.update(obs.t, obs.speed)
-        out = self.policy(obs.bev[None], [obs.instruction], np.array([obs.speed], dtype=np.float32),
+        out = self.policy(obs.bev[None], [self.read(obs)], np.array([obs.speed], dtype=np.float32),
                           np.array([stopped], dtype=np.float32))
         return _action(out["waypoints"][0], out["speed"][0], bool(_stops(out)[0]))
 
@@ -118,7 +132,7 @@ class LearnedAgent:
 def act_batch(agents: list[LearnedAgent], batch: list[Observation]) -> list[Action]:
     """Actions of several episodes' agents (``agents[i]`` sees ``batch[i]``) with one forward
     pass per checkpoint, device and runtime: the batched-inference hook of ``icrsumo serve-agent`` and of
-    parallel evaluation. Each agent keeps its own stop clock."""
+    parallel evaluation. Each agent keeps its own stop clock and instruction memory."""
     actions: list[Action | None] = [None] * len(batch)
     groups: dict[tuple[str, str, str], list[int]] = {}
     for i, a in enumerate(agents):
@@ -128,7 +142,7 @@ def act_batch(agents: list[LearnedAgent], batch: list[Observation]) -> list[Acti
         obs = [batch[i] for i in idx]
         stopped = np.array([agents[i].clock.update(o.t, o.speed) for i, o in zip(idx, obs)], dtype=np.float32)
         out = policy(np.stack([o.bev for o in obs]),
-                     [o.instruction for o in obs],
+                     [agents[i].read(o) for i, o in zip(idx, obs)],
                      np.array([o.speed for o in obs], dtype=np.float32), stopped)
         for i, wps, v, stop in zip(idx, out["waypoints"], out["speed"], _stops(out)):
             actions[i] = _action(wps, v, bool(stop))

@@ -12,6 +12,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from icrsumo.core.angles import angle_diff
 from icrsumo.core.types import EpisodeLog
 
 #: hop (m) of the dense route (leaderboard: ``interpolate_trajectory(hop_resolution=1.0)``)
@@ -140,11 +141,6 @@ def _cut_tail(piece: _Piece, length: float) -> tuple[float, float, float | None]
         left -= seg
         piece.pop()
     return piece[-1]
-
-
-def angle_diff(a: float, b: float) -> float:
-    """|a - b| wrapped to [0, pi] (rad)."""
-    return abs((a - b + math.pi) % (2.0 * math.pi) - math.pi)
 
 
 _Point = tuple[float, float, float, float]

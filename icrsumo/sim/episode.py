@@ -27,6 +27,7 @@ from functools import cache
 from pathlib import Path
 
 from icrsumo.agents.base import Action, Agent, EpisodeInfo, Observation, World, validate_action
+from icrsumo.core.angles import wrap_angle
 from icrsumo.core.errors import Field, InputError, Interrupted, describe
 from icrsumo.core.types import EgoRoute, EpisodeLog, Event, InstructionSet
 from icrsumo.core.vocab import EventKind, Family, Phase, Termination
@@ -371,7 +372,8 @@ class Episode:
         if answer is not None:
             text, iid = answer
         obs = Observation(t=frame.t, bev=bev, speed=state.speed, instruction=text, instruction_id=iid,
-                          notice=notice, world=world, answer=answer is not None)
+                          notice=notice, world=world, answer=answer is not None,
+                          compass=wrap_angle(state.yaw))
         for cb in callbacks:
             cb.on_observation(self, obs)
         if clock is not None:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from icrsumo.core.angles import angle_diff
 from icrsumo.core.types import EgoRoute, JunctionPass, LaneChange, LanePos
 
 from .networks import RoadNet
@@ -46,10 +47,6 @@ class _Cand:
     cost: float
 
 
-def _angle_diff(a: float, b: float) -> float:
-    return abs((a - b + math.pi) % (2 * math.pi) - math.pi)
-
-
 def candidates(
     net: RoadNet, x: float, y: float, heading: float | None, radius: float
 ) -> list[_Cand]:
@@ -62,7 +59,7 @@ def candidates(
     for lane, pos, dist, lane_heading in net.project(x, y, radius):
         cost = dist
         if heading is not None:
-            cost += HEADING_WEIGHT_M * (1.0 - math.cos(_angle_diff(heading, lane_heading)))
+            cost += HEADING_WEIGHT_M * (1.0 - math.cos(angle_diff(heading, lane_heading)))
         edge = lane.rsplit("_", 1)[0]
         if lane.startswith(":"):
             if lane not in net.via_edges:

@@ -36,7 +36,7 @@ def _obs(t: float = 20.05) -> Observation:
     bev = np.zeros((7, 128, 128), np.uint8)
     bev[0, 40:100, 50:80] = 255
     return Observation(t=t, bev=bev, speed=3.25, instruction="At the T-junction, turn left.",
-                       instruction_id=0, notice="")
+                       instruction_id=0, notice="", compass=-2.75)
 
 
 def test_codec_round_trips_exactly():
@@ -44,6 +44,10 @@ def test_codec_round_trips_exactly():
     back = decode_obs(json.loads(json.dumps(encode_obs(obs))))
     assert np.array_equal(back.bev, obs.bev) and back.bev.dtype == np.uint8
     assert (back.t, back.speed, back.instruction) == (obs.t, obs.speed, obs.instruction)
+    assert back.compass == obs.compass
+    # an older client sends no compass: it reads 0
+    old = {k: v for k, v in encode_obs(obs).items() if k != "compass"}
+    assert decode_obs(old).compass == 0.0
     assert (back.notice, back.instruction_id) == (obs.notice, obs.instruction_id)
     w = np.array([[2.5, 0.1], [5.0, 1 / 3]])
     a = decode_action(json.loads(json.dumps(encode_action(Action(waypoints=w, target_speed=4.1)))))

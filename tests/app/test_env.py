@@ -176,8 +176,8 @@ def test_an_icrsumo_agent_drives_the_env_through_the_helpers_as_in_evaluate(cach
     while True:
         o = to_observation(obs, info)
         inner = env.unwrapped._obs  # what the closed loop observed this step
-        assert (o.t, o.instruction, o.instruction_id, o.notice) == (inner.t, inner.instruction,
-                                                                    inner.instruction_id, inner.notice)
+        assert (o.t, o.instruction, o.instruction_id, o.notice, o.compass) == (
+            inner.t, inner.instruction, inner.instruction_id, inner.notice, inner.compass)
         obs, _, terminated, truncated, info = env.step(env.unwrapped.agent_action(agent.act(o)))
         if terminated or truncated:
             break
