@@ -120,8 +120,12 @@ def test_in_real_episodes_the_compass_is_the_logged_heading_and_a_turn_is_used_u
     used_up = 0
     for scenario in (suite.scenario("tiny_005"), suite.scenario("tiny_009")):   # turns then no new text
         agent, read = make_agent("bev-ngram-aug"), []
-        agent_read = agent.read
-        agent.read = lambda obs: read.append((obs.instruction, agent_read(obs))) or read[-1][1]
+
+        def recorded(obs, read=read, memory=agent.read):
+            read.append((obs.instruction, memory(obs)))
+            return read[-1][1]
+
+        agent.read = recorded
         seen.clear()
         log = icrsumo.run_episode(scenario, suite.instruction_sets[scenario.route_id][0], agent,
                                   callbacks=[Seen()])
