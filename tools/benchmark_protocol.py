@@ -37,6 +37,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from benchmark import bare_sumo
+from cpu import cpu_name
 
 from icrsumo.agents.registry import DEFAULT_AGENT, agent_factory
 from icrsumo.core.errors import InputError
@@ -81,17 +82,6 @@ ROWS = (
     ("parent after the episodes (outputs)", Phase.AFTER),
     ("other (not covered)", Phase.OTHER),
 )
-
-
-def cpu_name() -> str:
-    """The CPU's model name (/proc/cpuinfo), else what platform says."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 # --------------------------------------------------------------------------- preparation

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -22,22 +21,11 @@ from dataclasses import asdict
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from cpu import cpu_name  # noqa: E402,F401  (benchmark scripts import it from here)
+
 from icrsumo.learn.agent import CHECKPOINTS  # noqa: E402
 from icrsumo.learn.exact.proof import prove, record  # noqa: E402
 from icrsumo.world.scenario import find_scenarios  # noqa: E402
-
-
-def cpu_name() -> str:
-    """The CPU's model name and its SIMD flags that matter here (Linux /proc/cpuinfo)."""
-    try:
-        info = Path("/proc/cpuinfo").read_text()
-    except OSError:
-        return platform.processor() or platform.machine()
-    name = next((ln.split(":", 1)[1].strip() for ln in info.splitlines() if ln.startswith("model name")), "?")
-    flags = next((ln.split(":", 1)[1].split() for ln in info.splitlines() if ln.startswith("flags")), [])
-    simd = [f for f in ("avx2", "fma", "avx512f", "avx512_vnni", "amx_tile") if f in flags]
-    return f"{name} ({', '.join(simd)})"
-
 
 _FRAMES = None
 
