@@ -5,8 +5,8 @@ The networks see one frame: the BEV raster, the speed, the stopped time and the 
 turn instruction stays active past its junction until the next one arrives, and a distance
 instruction ("in 80 meters, turn left") names a junction that may not be the first one ahead.
 Without memory, both read as "turn at the junction in view": the shipped agents left the route
-on 13 of carla-fidelity's 104 baseline routes, 6 of them by turning at a junction before the
-named one. :class:`InstructionMemory` carries, per instruction, what the agent's own sensors
+on 13 of carla-fidelity's 104 baseline routes, 4 of them by turning at a junction before the
+named one and 1 by turning again under a left-turn instruction 450 m past its junction. :class:`InstructionMemory` carries, per instruction, what the agent's own sensors
 tell it (the compass, :attr:`icrsumo.agents.base.Observation.compass`, and the speed integrated
 over the control step: an odometer) and decides which text the network reads:
 
