@@ -15,15 +15,15 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import statistics
+import itertools
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from cpu import cpu_name  # noqa: E402
+from policy_latency import median_ms  # noqa: E402
 
 from icrsumo.learn.agent import CHECKPOINTS  # noqa: E402
 from icrsumo.learn.exact.checkpoint import ExactCheckpoint, layout, load  # noqa: E402
@@ -48,16 +48,14 @@ def random_checkpoint(shipped: ExactCheckpoint, width: int, hidden: int, seed: i
     return ExactCheckpoint(config=cfg, arrays=arrays, meta={"source": f"random width {width}"})
 
 
-def median_ms(policy: ExactPolicy, frames: list[np.ndarray], texts: list[str], calls: int) -> float:
-    speed, stopped = np.array([5.0], np.float32), np.array([0.0], np.float32)
-    for i in range(20):
-        policy(frames[i % len(frames)][None], [texts[i % len(texts)]], speed, stopped)
-    times = []
-    for i in range(calls):
-        t0 = time.perf_counter()
-        policy(frames[i % len(frames)][None], [texts[i % len(texts)]], speed, stopped)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times) * 1e3
+def act_ms(policy: ExactPolicy, frames: list[np.ndarray], texts: list[str], calls: int) -> float:
+    """Median ms of one batch-1 call over ``calls`` calls cycling through ``frames`` and ``texts``."""
+    speed, stopped, i = np.array([5.0], np.float32), np.array([0.0], np.float32), itertools.count()
+
+    def one() -> None:
+        n = next(i)
+        policy(frames[n % len(frames)][None], [texts[n % len(texts)]], speed, stopped)
+    return median_ms(one, calls)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -73,11 +71,11 @@ def main(argv: list[str] | None = None) -> int:
     rng = np.random.default_rng(2026)
     frames = [(rng.random((7, 128, 128)) < 0.15).astype(np.uint8) * 255 for _ in range(16)]
     texts = ["Turn left at the next intersection.", "Follow the road.", "Change to the right lane."]
-    base = median_ms(ExactPolicy(shipped), frames, texts, a.calls)
+    base = act_ms(ExactPolicy(shipped), frames, texts, a.calls)
     print(f"{a.agent} (shipped, width {shipped.config.width}, hidden {shipped.config.hidden}): "
           f"{base:.3f} ms per act")
     for w in a.widths:
-        ms = median_ms(ExactPolicy(random_checkpoint(shipped, w, hidden)), frames, texts, a.calls)
+        ms = act_ms(ExactPolicy(random_checkpoint(shipped, w, hidden)), frames, texts, a.calls)
         print(f"width {w}, hidden {hidden}: {ms:.3f} ms per act ({ms / base:.2f}x the shipped)")
     print(f"median of {a.calls} calls each, batch 1, one BLAS thread; {cpu_name()}")
     return 0

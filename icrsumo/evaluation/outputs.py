@@ -14,6 +14,7 @@ from icrsumo.instructions.families import ALL_FAMILIES
 from icrsumo.instructions.store import skipped_families
 from icrsumo.results.store import ResultStore
 from icrsumo.results.summary import Summary
+from icrsumo.scoring import get_scoring
 from icrsumo.world.convert import safe_name
 from icrsumo.world.scenario import Scenario, find_scenarios, read_scenario
 
@@ -72,7 +73,7 @@ def write_outputs(opts: EvalOptions, out: Path, store: ResultStore, records: lis
     write_html(out, summary, records, attribution, store, scen, instr_dir)
     try:
         rollout_figure(out, store, records, scenarios, instr_dir, route=opts.rollout_route, seed=opts.seed,
-                       families=opts.families)
+                       families=opts.families, scoring=get_scoring(opts.scoring))
     except InputError as err:  # the figure is optional; the numbers are all in the tables
         note(f"no rollout figure: {err.line(note_names())}")
     if not opts.quiet:

@@ -6,9 +6,10 @@ turn instruction stays active past its junction until the next one arrives, and 
 instruction ("in 80 meters, turn left") names a junction that may not be the first one ahead.
 Without memory, both read as "turn at the junction in view": the shipped agents left the route
 on 13 of carla-fidelity's 104 baseline routes, 4 of them by turning at a junction before the
-named one and 1 by turning again under a left-turn instruction 450 m past its junction. :class:`InstructionMemory` carries, per instruction, what the agent's own sensors
-tell it (the compass, :attr:`icrsumo.agents.base.Observation.compass`, and the speed integrated
-over the control step: an odometer) and decides which text the network reads:
+named one and 1 by turning again under a left-turn instruction 450 m past its junction.
+:class:`InstructionMemory` carries, per instruction, what the agent's own sensors tell it (the
+compass, :attr:`icrsumo.agents.base.Observation.compass`, and the speed integrated over the
+control step: an odometer) and decides which text the network reads:
 
 * **used up**: a left (right) turn instruction once the heading has turned by
   :data:`TURN_DONE_RAD` to the left (right) since it arrived, a lane-change instruction once the

@@ -11,6 +11,7 @@ from pathlib import Path
 from icrsumo.core.fsio import write_atomic
 from icrsumo.core.types import EpisodeLog, EpisodeRecord, InstructionSet
 from icrsumo.results.summary import Summary
+from icrsumo.scoring import DEFAULT_SCORING, get_scoring
 
 from .html_route import Render, esc, route_section
 from .rows import ask_note, gain_note, table_cells
@@ -126,11 +127,11 @@ def html_report(summary: Summary, records: Sequence[EpisodeRecord], attribution:
     by_route: dict[str, list[EpisodeRecord]] = {}
     for r in records:
         by_route.setdefault(r.route_id, []).append(r)
-    sections = []
+    sections, scoring = [], get_scoring(summary.scoring or DEFAULT_SCORING)
     for route in sorted(by_route):
         route_sets = sets(route)
         sections.append(route_section(route, by_route[route], flipped, logs, route_sets, nets(route),
-                                      render(route)))
+                                      render(route), scoring))
     return ("<!DOCTYPE html><html lang=en><head><meta charset=utf-8><title>icrsumo report</title>"
             f"<style>{_CSS}</style></head><body>{_head(summary)}{_filters(agents, families)}"
             f"{_results(summary)}{_flips(attribution)}"

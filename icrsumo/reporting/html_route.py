@@ -13,7 +13,7 @@ import numpy as np
 
 from icrsumo.core.types import EpisodeLog, EpisodeRecord, InstructionSet
 from icrsumo.core.vocab import Family
-from icrsumo.scoring.lb1 import LB1
+from icrsumo.scoring import DEFAULT_SCORING, Scoring, get_scoring
 
 from .trajectory import divergence_t, drawn_points
 
@@ -67,7 +67,12 @@ class _Frame:
         return bool(np.any(np.all((shape >= self.lo) & (shape <= self.hi), axis=1)))
 
 
-def _episode_svg(f: _Frame, rec: EpisodeRecord, log: EpisodeLog, out_kind: str, base: bool) -> list[str]:
+#: the rules whose penalised events are marked when a caller names none
+_SCORING = get_scoring(DEFAULT_SCORING)
+
+
+def _episode_svg(f: _Frame, rec: EpisodeRecord, log: EpisodeLog, out_kind: str, base: bool,
+                 scoring: Scoring) -> list[str]:
     """One episode's trajectory, its end and its events."""
     colour = "#000000" if base else _COLOURS.get(str(rec.termination_class) or "crashed", "#777777")
     attrs = (f'class="ep" data-agent="{esc(rec.agent)}" data-family="{esc(rec.family)}" '
@@ -82,7 +87,7 @@ def _episode_svg(f: _Frame, rec: EpisodeRecord, log: EpisodeLog, out_kind: str, 
         out.append(f'<circle cx="{ex:.1f}" cy="{ey:.1f}" r="4" fill="{colour}"><title>{esc(label)} '
                    f'— ended at t = {log.t[-1]:.1f} s, {log.progress[-1]:.0f} m along the route'
                    '</title></circle>')
-    for ev in LB1.penalised_events(log):  # a contact is logged on every step of it: those counted
+    for ev in scoring.penalised_events(log):  # a contact is logged on every step of it: those counted
         if ev.x or ev.y:
             cx, cy = f.at(ev.x, ev.y)
             out.append(f'<text x="{cx:.1f}" y="{cy:.1f}" font-size="12" fill="{colour}" '
@@ -92,9 +97,10 @@ def _episode_svg(f: _Frame, rec: EpisodeRecord, log: EpisodeLog, out_kind: str, 
     return out
 
 
-def map_svg(net, logs: Sequence[tuple[EpisodeRecord, EpisodeLog, str]], base_keys: set[Key]) -> str:
+def map_svg(net, logs: Sequence[tuple[EpisodeRecord, EpisodeLog, str]], base_keys: set[Key],
+            scoring: Scoring = _SCORING) -> str:
     """The route, the lanes around it and every episode's trajectory with its end and
-    infractions, as an inline SVG."""
+    infractions (the events ``scoring`` penalises), as an inline SVG."""
     first = logs[0][1]
     route = np.asarray([p[:2] for p in first.route], dtype=float) if first.route else np.zeros((0, 2))
     every = [route] + [drawn_points(log) for _, log, _ in logs]
@@ -113,7 +119,7 @@ def map_svg(net, logs: Sequence[tuple[EpisodeRecord, EpisodeLog, str]], base_key
         out.append(f'<path d="{f.path(route)}" stroke="#9ecae1" stroke-width="{max(5 * f.s, 2):.1f}" '
                    'fill="none" stroke-linejoin="round"><title>the route</title></path>')
     for rec, log, out_kind in logs:
-        out += _episode_svg(f, rec, log, out_kind, _key(rec) in base_keys)
+        out += _episode_svg(f, rec, log, out_kind, _key(rec) in base_keys, scoring)
     out.append("</svg>")
     return "".join(out)
 
@@ -164,8 +170,9 @@ def clip(render: Render, base: EpisodeLog, var: EpisodeLog, t_div: float) -> str
 
 
 def _episode_row(r: EpisodeRecord, kind: str, log: EpisodeLog | None, iset: InstructionSet | None,
-                 t_max: float) -> str:
-    """One episode's table row: scores, how it ended, its infractions, its timeline."""
+                 t_max: float, scoring: Scoring) -> str:
+    """One episode's table row: scores, how it ended, its infractions (when and where: the events
+    ``scoring`` penalises), its timeline."""
     texts = {i.id: i.rendered() for i in iset.instructions} if iset is not None else {}
     if r.status != "done":
         ended = f"crashed: {r.message[:160]}"
@@ -175,7 +182,7 @@ def _episode_row(r: EpisodeRecord, kind: str, log: EpisodeLog | None, iset: Inst
         ended = str(r.termination)
     inf = "; ".join(f"{k} ×{f:g}" for k, f in r.infractions) or "—"
     if log is not None:  # when and where: the penalised events of the log
-        at = [f"{ev.kind} at t = {ev.t:.1f} s, {ev.pos:.0f} m" for ev in LB1.penalised_events(log)]
+        at = [f"{ev.kind} at t = {ev.t:.1f} s, {ev.pos:.0f} m" for ev in scoring.penalised_events(log)]
         if at:
             inf += " (" + "; ".join(at) + ")"
     return (f'<tr data-agent="{esc(r.agent)}" data-family="{esc(r.family)}" data-outcome="{kind}">'
@@ -208,20 +215,22 @@ def _clips(draw: Render, with_kind: list[tuple[EpisodeRecord, EpisodeLog, str]],
 
 def route_section(route: str, records: Sequence[EpisodeRecord], flipped: set[Key],
                   logs: Callable[[EpisodeRecord], EpisodeLog | None],
-                  sets: Mapping[tuple[str, int], InstructionSet], net, draw: Render | None) -> str:
+                  sets: Mapping[tuple[str, int], InstructionSet], net, draw: Render | None,
+                  scoring: Scoring = _SCORING) -> str:
     """The section of ``route``: its episodes ``records`` (``flipped``: the keys of the flips),
     ``logs(record)`` their stored logs, ``sets`` the route's instruction sequences by (family,
-    k), ``net`` its RoadNet (None: no map), ``draw`` its map views (None: no clips)."""
+    k), ``net`` its RoadNet (None: no map), ``draw`` its map views (None: no clips); the
+    infractions marked are those the run's ``scoring`` penalises."""
     recs = sorted(records, key=lambda r: (r.agent, r.family != Family.BASELINE, str(r.family), r.k))
     loaded = [(r, log) for r in recs if r.status == "done" and (log := logs(r)) is not None]
     log_of = {id(r): log for r, log in loaded}
     base_logs = {r.agent: log for r, log in loaded if r.family == Family.BASELINE}
     base_keys = {_key(r) for r, _ in loaded if r.family == Family.BASELINE}
     with_kind = [(r, log, outcome(r, _key(r) in flipped)) for r, log in loaded]
-    svg = map_svg(net, with_kind, base_keys) if with_kind else "<p>no stored log to draw</p>"
+    svg = map_svg(net, with_kind, base_keys, scoring) if with_kind else "<p>no stored log to draw</p>"
     t_max = max((log.t[-1] - log.t[0] for _, log in loaded if log.t), default=0.0)
     rows = [_episode_row(r, outcome(r, _key(r) in flipped), log_of.get(id(r)), sets.get((str(r.family), r.k)),
-                         t_max) for r in recs]
+                         t_max, scoring) for r in recs]
     clips = _clips(draw, with_kind, base_logs) if draw is not None else []
     return (f'<section class="route" id="route-{esc(route)}" data-route="{esc(route)}">'
             f'<h3>route {esc(route)}</h3>'

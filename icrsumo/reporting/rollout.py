@@ -11,7 +11,7 @@ import numpy as np
 from icrsumo.core.errors import visible
 from icrsumo.core.types import EpisodeLog, EpisodeRecord
 from icrsumo.results.store import ResultStore
-from icrsumo.scoring.lb1 import LB1
+from icrsumo.scoring import DEFAULT_SCORING, Scoring, get_scoring
 from icrsumo.world.convert import safe_name
 from icrsumo.world.scenario import find_scenarios, read_scenario
 
@@ -66,7 +66,11 @@ def _draw_map(ax, net, baseline_log: EpisodeLog, lo: np.ndarray, hi: np.ndarray)
                 solid_capstyle="round")
 
 
-def _draw_trajectory(ax, label: str, log: EpisodeLog, colour) -> None:
+#: the rules whose penalised events are marked when a caller names none
+_SCORING = get_scoring(DEFAULT_SCORING)
+
+
+def _draw_trajectory(ax, label: str, log: EpisodeLog, colour, scoring: Scoring) -> None:
     """One trajectory with its start, its end (and why it ended) and its penalised events; the
     baseline drawn wide underneath (an identical variant cannot hide it)."""
     if not len(log.x):
@@ -79,9 +83,9 @@ def _draw_trajectory(ax, label: str, log: EpisodeLog, colour) -> None:
     ax.plot(x[-1], y[-1], "X", color=colour, ms=8, zorder=4)
     ax.annotate(_ENDED.get(str(log.termination), str(log.termination)), (x[-1], y[-1]), xytext=(5, -10),
                 textcoords="offset points", fontsize=8, color=colour, zorder=5)
-    # the penalised events (Leaderboard 1.0's): a contact is logged on every step of it, and
-    # only the collisions CollisionTest counts are marked
-    for ev in LB1.penalised_events(log):
+    # the events the run's scoring penalises: a contact is logged on every step of it, and only
+    # the collisions its CollisionTest counts are marked
+    for ev in scoring.penalised_events(log):
         if ev.x or ev.y:
             ax.plot(ev.x, ev.y, "*", color=colour, ms=11, mec="black", mew=0.5, zorder=5)
             ax.annotate(str(ev.kind).replace("_", " "), (ev.x, ev.y), xytext=(5, 4),
@@ -90,10 +94,11 @@ def _draw_trajectory(ax, label: str, log: EpisodeLog, colour) -> None:
 
 @plain_text
 def paired_rollout(net, baseline_log: EpisodeLog, variant_logs: list[tuple[str, EpisodeLog, str]],
-                   baseline_text: str, path: Path, title: str = "") -> None:
+                   baseline_text: str, path: Path, title: str = "", scoring: Scoring = _SCORING) -> None:
     """The map's lanes around the trajectories (bounding box + 30 m), the route, the baseline
     trajectory (wide, underneath) and each counterfactual one (``(label, log, instruction
-    text)``) with start (o) and end (X, with why it ended) markers and its penalised events (*),
+    text)``) with start (o) and end (X, with why it ended) markers and the events ``scoring``
+    penalises (*),
     and the instruction texts as captions under the map, coloured like their lines."""
     from matplotlib import colormaps
 
@@ -109,7 +114,7 @@ def paired_rollout(net, baseline_log: EpisodeLog, variant_logs: list[tuple[str, 
     lo, hi = _fill(lo, hi, _MAP_W / _MAP_H)
     _draw_map(ax, net, baseline_log, lo, hi)
     for label, log, _, colour in trajs:
-        _draw_trajectory(ax, label, log, colour)
+        _draw_trajectory(ax, label, log, colour, scoring)
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal", adjustable="box")
@@ -152,7 +157,8 @@ def _variant(records: list[EpisodeRecord], store: ResultStore, base_log: Episode
 
 
 def rollout_figure(out: Path, store: ResultStore, records: list[EpisodeRecord], scenarios: Path,
-                   instr_dir: Path, *, route: str | None, seed: int, families: tuple[str, ...]) -> None:
+                   instr_dir: Path, *, route: str | None, seed: int, families: tuple[str, ...],
+                   scoring: Scoring = _SCORING) -> None:
     """Paired rollout figure: the baseline against one variant of each of ``families`` for one
     route and agent (``route``, default the first with a finished baseline; the agent of the
     first finished baseline episode): the first variant that failed (else k = 0)."""
@@ -177,4 +183,4 @@ def rollout_figure(out: Path, store: ResultStore, records: list[EpisodeRecord], 
     fig = out / "figures" / f"rollout_{safe_name(route)}.png"
     fig.parent.mkdir(parents=True, exist_ok=True)
     paired_rollout(net, base_log, variants, sets[("baseline", 0)].instructions[0].rendered(),
-                   fig, title=f"{agent} on {route}")
+                   fig, title=f"{agent} on {route}", scoring=scoring)

@@ -208,6 +208,16 @@ class SensorState:
     stop: StopTarget | None = None
 
 
+@dataclass(frozen=True)
+class _LaneExit:
+    """What leaves a normal lane: its connections, their traffic lights (sorted) and the junction
+    whose stop sign it approaches ("" none)."""
+
+    conns: tuple
+    tls: tuple[str, ...]
+    stop_node: str
+
+
 class Sensors:
     """The static side of the sensors for one network: lane headings, the driving lanes
     (:class:`~icrsumo.sim.lanes.DrivingLanes`), the drivable area and the ego's size
@@ -219,25 +229,32 @@ class Sensors:
         self.net, self.lanes = net, lanes
         self.drivable, self.size = drivable, size
         self.heading = LaneHeading(net)
-        self._conns_of: dict[str, tuple] = {}
+        self._exits: dict[str, _LaneExit] = {}
         self._stop_lines: dict[str, StopLine] = {}
 
-    def _conns(self, lane: str) -> tuple:
-        """The connections from normal lane ``lane`` (none from a junction-internal one)."""
-        got = self._conns_of.get(lane)
+    def _exit(self, lane: str) -> _LaneExit:
+        """What leaves normal lane ``lane`` (nothing from a junction-internal one), looked up once."""
+        got = self._exits.get(lane)
         if got is None:
-            got = ()
+            conns: tuple = ()
             if lane and not lane.startswith(":"):
                 edge, _, idx = lane.rpartition("_")
                 i = int(idx)
-                got = tuple(c for nxt in self.net.successors.get(edge, ())
-                            for c in self.net.connections[(edge, nxt)] if c.from_lane == i)
-            self._conns_of[lane] = got
+                conns = tuple(c for nxt in self.net.successors.get(edge, ())
+                              for c in self.net.connections[(edge, nxt)] if c.from_lane == i)
+            stops = lane in self.net.lane_shape and any(c.state in ("s", "w") for c in conns)
+            got = self._exits[lane] = _LaneExit(
+                conns, tuple(sorted({c.tls for c in conns if c.tls})),
+                self.net.edge_to_node.get(lane.rpartition("_")[0], "") if stops else "")
         return got
+
+    def _conns(self, lane: str) -> tuple:
+        """The connections from normal lane ``lane`` (none from a junction-internal one)."""
+        return self._exit(lane).conns
 
     def tls_ahead(self, lane: str) -> tuple[str, ...]:
         """Traffic lights of the connections from ``lane`` (none when it is junction-internal)."""
-        return tuple(sorted({c.tls for c in self._conns(lane) if c.tls}))
+        return self._exit(lane).tls
 
     def lights_needed(self, state: SensorState, lane: str) -> tuple[str, ...]:
         """The lights whose states :meth:`detect` needs in the frame in which SUMO reports the
@@ -265,9 +282,7 @@ class Sensors:
     def stop_sign(self, lane: str) -> str:
         """The junction whose stop sign normal lane ``lane`` approaches ("" none): a connection
         from the lane with SUMO's stop (``s``) or all-way stop (``w``) state."""
-        if lane in self.net.lane_shape and any(c.state in ("s", "w") for c in self._conns(lane)):
-            return self.net.edge_to_node.get(lane.rpartition("_")[0], "")
-        return ""
+        return self._exit(lane).stop_node
 
     def _tail(self, ego: EgoState) -> tuple[float, float, float, float]:
         """The ego's tail segment (RunningRedLightTest's): near end, far end (m)."""
