@@ -22,7 +22,9 @@ Layout of OUT (resumable: finished episodes are kept and skipped on a rerun):
 Each ``.npz`` holds ``bev`` (N, C, H, W/8) uint8 bit-packed raster (``numpy.unpackbits`` along
 the last axis restores 0/1), ``speed`` (N,) m/s, ``instruction`` (N,) int16 index into
 ``instructions`` (a JSON list of the episode's instructions: text as shown, type, intent, slots;
--1 before the first), ``waypoints`` (N, K, 2) m ego frame, ``target_speed`` (N,) m/s,
+-1 before the first; with ``memory`` on, the last entry is "Follow the road.", recorded for the
+frames where the learned agents' instruction memory would hand the network that text instead of
+the active instruction), ``waypoints`` (N, K, 2) m ego frame, ``target_speed`` (N,) m/s,
 ``perturbed`` (N,) uint8, ``t`` (N,) s and ``stopped_for`` (N,) s (time since the ego
 stopped, 0 while moving; see :class:`icrsumo.learn.labels.StopClock`). :func:`read_episode`
 reads one back, checked (``icrsumo train`` reads them with it).
@@ -50,7 +52,7 @@ from icrsumo.core.errors import Field, InputError, check_seed, expect
 from icrsumo.core.fsio import OutFolder, dumps_json, read_json_doc, write_atomic
 from icrsumo.core.resources import bundled_suites, suite_coords
 from icrsumo.core.types import Instruction
-from icrsumo.core.vocab import Termination
+from icrsumo.core.vocab import Intent, Termination
 from icrsumo.instructions.banks import load_banks
 from icrsumo.instructions.generate import baseline_set
 from icrsumo.world.convert import ConvertOptions, convert_routes, safe_name
@@ -58,6 +60,7 @@ from icrsumo.world.scenario import find_scenarios, read_scenario
 
 from .augment import instruction_slots
 from .labels import ARC_M, StopClock, resample_path
+from .memory import FOLLOW_TEXT, InstructionMemory
 
 COLLECT_FORMAT = "icrsumo-collect/1"
 #: bundled suites that hold evaluation routes (icrsumo's splits, LangAuto's tracks): never
@@ -76,7 +79,12 @@ class CollectOptions:
     """What to collect: ``passes`` per route (pass 0 clean, the others perturbed), every
     ``every``-th agent step stored, background ``traffic`` level, ``limit`` routes (0: all).
     ``driver``: a learned agent (name or checkpoint) that drives instead of the expert while the
-    expert still labels every frame (DAgger); no perturbations then."""
+    expert still labels every frame (DAgger); no perturbations then. ``memory``: each frame
+    records the text a learned agent's instruction memory would hand its network at that step
+    (:class:`icrsumo.learn.memory.InstructionMemory` on the driven ego's compass and speed:
+    "Follow the road." once a turn or lane change is used up, or while a named distance is
+    still ahead), so that the network is trained on the text it reads when it drives; off: the
+    active instruction (data collected before issue 47's memory)."""
 
     suite: str = "train"
     passes: int = 3
@@ -86,6 +94,7 @@ class CollectOptions:
     workers: int = 1
     limit: int = 0
     driver: str = ""
+    memory: bool = True
 
     def check(self) -> None:
         if self.suite in EVAL_SPLITS or _is_eval_file(self.suite):
@@ -137,9 +146,13 @@ class Collector(RouteOracle):
 
     name = "collector"
 
-    def __init__(self, rng: np.random.Generator, perturb: bool, every: int, driver: object = None) -> None:
+    def __init__(self, rng: np.random.Generator, perturb: bool, every: int, driver: object = None,
+                 memory: bool = False, follow_index: int = -1) -> None:
         super().__init__()
         self.rng, self.perturb, self.every, self.driver = rng, perturb, every, driver
+        # with memory: frames whose text the memory replaces record ``follow_index``
+        self.memory, self.follow_index = memory, follow_index
+        self.recall, self.dt = InstructionMemory(), 0.1
         self.rows: dict[str, list] = {k: [] for k in ("bev", "speed", "instruction", "waypoints",
                                                        "target_speed", "perturbed", "t", "stopped_for")}
         self._n = 0
@@ -151,13 +164,16 @@ class Collector(RouteOracle):
     def act(self, obs: Observation) -> Action:
         label = super().act(obs)
         stopped_for = self._clock.update(obs.t, obs.speed)
+        instruction = obs.instruction_id
+        if self.memory and self.recall.text(obs, self.dt) != obs.instruction:
+            instruction = self.follow_index
         if self.perturb:
             self._schedule()
         if self._n % self.every == 0:
             r = self.rows
             r["bev"].append(np.packbits(obs.bev > 0, axis=-1))
             r["speed"].append(obs.speed)
-            r["instruction"].append(obs.instruction_id)
+            r["instruction"].append(instruction)
             r["waypoints"].append(resample_path(label.waypoints))
             r["target_speed"].append(label.target_speed or 0.0)
             r["perturbed"].append(1 if self._left > 0 else 0)
@@ -170,6 +186,7 @@ class Collector(RouteOracle):
 
     def reset(self, info) -> None:
         super().reset(info)
+        self.recall, self.dt = InstructionMemory(), float(info.control_dt)
         if self.driver is not None:
             self.driver.reset(info)
 
@@ -280,6 +297,11 @@ def _instruction_doc(ins: Instruction) -> dict:
             "distance": ins.distance, "slots": instruction_slots(ins)}
 
 
+#: the instruction document of the text the memory hands the network in place of the active one
+FOLLOW_DOC = {"id": -1, "text": FOLLOW_TEXT, "type": "follow", "intent": Intent.FOLLOW.value,
+              "distance": None, "slots": {}}
+
+
 def episode_rng(seed: int, route_id: str, pass_k: int) -> np.random.Generator:
     """The Generator of one (route, pass): phrasings and perturbations."""
     return np.random.default_rng([seed, zlib.crc32(route_id.encode("utf-8")), pass_k])
@@ -301,7 +323,9 @@ def collect_episode(scenario_dir: str, pass_k: int, opts: CollectOptions) -> tup
 
         cls = BUILTIN.get(opts.driver)
         driver = cls() if cls is not None else LearnedAgent(opts.driver)
-    agent = Collector(rng, perturb=pass_k > 0 and driver is None, every=opts.every, driver=driver)
+    docs = [_instruction_doc(i) for i in iset.instructions]
+    agent = Collector(rng, perturb=pass_k > 0 and driver is None, every=opts.every, driver=driver,
+                      memory=opts.memory, follow_index=len(docs))
     log = run_episode(sc, iset, agent)
     r = agent.rows
     if log.termination in STUCK:
@@ -319,7 +343,7 @@ def collect_episode(scenario_dir: str, pass_k: int, opts: CollectOptions) -> tup
         "perturbed": np.asarray(r["perturbed"], dtype=np.uint8),
         "t": np.asarray(r["t"], dtype=np.float32),
         "stopped_for": np.asarray(r["stopped_for"], dtype=np.float32),
-        "instructions": np.asarray(json.dumps([_instruction_doc(i) for i in iset.instructions])),
+        "instructions": np.asarray(json.dumps(docs + [FOLLOW_DOC] if opts.memory else docs)),
     }
     buf = io.BytesIO()
     np.savez_compressed(buf, **arrays)
@@ -366,6 +390,7 @@ def collect(opts: CollectOptions, out: Path, quiet: bool = False) -> dict:
         old = read_json_doc(manifest_path, COLLECT_FORMAT, "collect manifest",
                            f"use another {Field('out')} folder, or delete the damaged collect.json and "
                            "rerun with the same options (finished episodes are kept)").get("config", {})
+        old.setdefault("memory", False)   # folders collected before the option existed
         if old != config:
             raise InputError(manifest_path, "config", "holds data of a different configuration",
                              f"use another {Field('out')} folder, or the same options")

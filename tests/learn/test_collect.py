@@ -85,3 +85,39 @@ def test_dagger_pass_lets_a_learned_agent_drive(one_route):
     z = np.load(io.BytesIO(a))
     assert sa["frames"] > 10 and not z["perturbed"].any()   # the driver is never perturbed
     assert collect_episode(one_route, 1, opts)[0] == a
+
+
+def test_memory_records_the_text_the_network_reads(one_route):
+    """With memory (the default) a frame records "Follow the road." (the last document) exactly
+    where a learned agent's InstructionMemory hands its network that text; without, every frame
+    records the active instruction, as before."""
+    from icrsumo.learn.memory import FOLLOW_TEXT
+
+    on = np.load(io.BytesIO(collect_episode(one_route, 0, CollectOptions(every=1))[0]))
+    off = np.load(io.BytesIO(collect_episode(one_route, 0, CollectOptions(every=1, memory=False))[0]))
+    docs_on, docs_off = json.loads(str(on["instructions"])), json.loads(str(off["instructions"]))
+    assert docs_on[:-1] == docs_off and docs_on[-1]["text"] == FOLLOW_TEXT
+    assert docs_on[-1]["intent"] == "follow" and len(on["instruction"]) == len(off["instruction"])
+    # the same drive (memory changes records, not driving); the memory replaced some frames ...
+    assert np.array_equal(on["waypoints"], off["waypoints"])
+    replaced = on["instruction"] != off["instruction"]
+    assert replaced.any() and np.all(on["instruction"][replaced] == len(docs_off))
+    # ... and only turns, lane changes or distance instructions
+    kinds = {docs_off[i]["intent"] for i in off["instruction"][replaced]}
+    assert kinds <= {"left", "right", "straight", "lane_left", "lane_right"}
+    assert FOLLOW_TEXT not in {docs_off[i]["text"] for i in off["instruction"][replaced]}
+
+
+def test_old_folders_resume_without_memory(converted, tmp_path):
+    """A folder collected before the memory option (its config has no "memory") is resumed by
+    --no-memory and refused by the default."""
+    opts = CollectOptions(suite=str(converted["tiny"]), passes=1, every=5, limit=1, memory=False)
+    collect(opts, tmp_path, quiet=True)
+    manifest = tmp_path / "collect.json"
+    doc = json.loads(manifest.read_text())
+    del doc["config"]["memory"]
+    manifest.write_text(json.dumps(doc))
+    assert collect(opts, tmp_path, quiet=True)["episodes"] == doc["episodes"]
+    with pytest.raises(InputError, match="different configuration"):
+        collect(CollectOptions(suite=str(converted["tiny"]), passes=1, every=5, limit=1), tmp_path,
+                quiet=True)

@@ -30,6 +30,9 @@ def add(sub: Commands) -> None:
     c.add_argument("--limit", type=int, default=0, help="only the first N routes (0: all)")
     c.add_argument("--driver", help="learned agent (name or checkpoint) that drives while the expert "
                    "labels (DAgger)")
+    c.add_argument("--no-memory", dest="memory", action="store_false",
+                   help="record the active instruction on every frame, not the text the learned "
+                   "agents' instruction memory hands their network (data as before issue 47)")
     c.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="worker processes (default: number of cores)")
     c.set_defaults(func=run)
@@ -42,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     opts = CollectOptions(suite=args.suite, passes=args.passes, seed=args.seed, every=args.every,
                           traffic=args.traffic, workers=args.workers, limit=args.limit,
-                          driver=args.driver or "")
+                          driver=args.driver or "", memory=args.memory)
     m = collect(opts, Path(args.out))
     print(f"{len(m['episodes'])} episodes, {m['frames']} frames in {time.perf_counter() - t0:.1f} s "
           f"-> {args.out}")
