@@ -57,28 +57,25 @@ SCORED_BY = {"lb1": "CARLA Leaderboard 1.0's rules", "lb2": "CARLA Leaderboard 2
 #: collect folder name -> what it holds (the command that wrote it and its routes)
 DATA = {
     "train": "`icrsumo collect --out train` (the bundled `train` split: 272 routes on icrsumo's six "
-             "towns that share no edge sequence with the evaluation splits; 816 episodes, 276,911 frames)",
+             "towns that share no edge sequence with the evaluation splits; 816 episodes, 277,077 frames)",
     "carla-train": "`icrsumo collect --suite carla-train --out carla-train` (128 random routes on CARLA's "
-                   "eight towns, none of which drives a whole LangAuto route; 384 episodes, 201,585 frames)",
+                   "eight towns, none of which drives a whole LangAuto route; 384 episodes, 201,611 frames)",
     "carla-focus": "`icrsumo collect --suite carla-focus --out carla-focus` (92 routes on CARLA's towns, "
                    "each with a lane change across two lanes or more or a roundabout; none drives a whole "
-                   "LangAuto route; 276 episodes, 116,359 frames)",
-    "dagger1-carla-train": "`icrsumo collect --suite carla-train --driver FIRST.pt --passes 1 --out "
-                           "dagger1-carla-train` (the first DAgger round: `FIRST.pt`, the first checkpoint "
-                           "of `bev-ngram-aug` trained on the three folders above (SHA-256 ee418b07..., not "
-                           "kept in the repository), drives its clean pass, the expert labels; 128 episodes, "
-                           "63,525 frames)",
-    "dagger1-carla-focus": "`icrsumo collect --suite carla-focus --driver FIRST.pt --passes 1 --out "
-                           "dagger1-carla-focus` (the first DAgger round on `carla-focus`; 92 episodes, "
-                           "43,703 frames)",
+                   "LangAuto route; 276 episodes, 116,416 frames)",
     "dagger-carla-train": "`icrsumo collect --suite carla-train --driver bev-ngram-aug --out "
-                          "dagger-carla-train` (the second DAgger round: the checkpoint of `bev-ngram-aug` "
-                          "trained on the expert folders and the first round (SHA-256 9a949907..., shipped "
-                          "before, in the git history) drives, the expert labels; 384 episodes, "
-                          "195,077 frames)",
+                          "dagger-carla-train` (a DAgger round: the `bev-ngram-aug` shipped before this "
+                          "checkpoint (exact checkpoint, SHA-256 6cb72f96..., in the git history), with its "
+                          "instruction memory, drives, the expert labels; 384 episodes, 186,634 frames)",
     "dagger-carla-focus": "`icrsumo collect --suite carla-focus --driver bev-ngram-aug --out "
-                          "dagger-carla-focus` (the second DAgger round on `carla-focus`; 276 episodes, "
-                          "123,272 frames)",
+                          "dagger-carla-focus` (the same DAgger round on `carla-focus`; 276 episodes, "
+                          "113,372 frames)",
+    "dagger2-carla-train": "`icrsumo collect --suite carla-train --driver bev-ngram --passes 1 --out "
+                           "dagger2-carla-train` (the `bev-ngram` shipped before (SHA-256 354c5751..., in "
+                           "the git history), with its memory, drives its clean pass, the expert labels; 128 "
+                           "episodes, 60,451 frames)",
+    "dagger2-carla-focus": "`icrsumo collect --suite carla-focus --driver bev-ngram --passes 1 --out "
+                           "dagger2-carla-focus` (the same on `carla-focus`; 92 episodes, 40,425 frames)",
 }
 
 
@@ -88,7 +85,8 @@ def _data_line(folders: list[str]) -> str:
 
 
 def card(name: str, summary: dict, train_s: float | None, eval_cmd: str,
-         extra: list[tuple[str, dict, str]] = (), models_at_once: str = "three") -> str:
+         extra: list[tuple[str, dict, str]] = (), models_at_once: str = "three",
+         hardware: str = "one NVIDIA H100 (the `device` tool)") -> str:
     """The model card of shipped checkpoint ``name``; ``train_s``: its training wall time (s),
     by default the one its metadata records."""
     ck = torch.load(CHECKPOINTS / f"{name}.pt", weights_only=True)
@@ -117,8 +115,9 @@ def card(name: str, summary: dict, train_s: float | None, eval_cmd: str,
         "with the exact checkpoint unless they say otherwise.", "",
         "## Data and training", "",
         "- Data: " + _data_line(meta["data"]) + "; 3 passes per route unless said otherwise, pass 0 "
-        "clean and passes 1-2 with perturbations for recovery; route-oracle expert labels (its final "
-        "standstill dropped where it got stuck); 5 Hz. "
+        "clean and passes 1-2 with perturbations for recovery (none where a learned agent drives); "
+        "route-oracle expert labels (its final standstill dropped where it got stuck); 5 Hz; each frame "
+        "records the text the instruction memory hands the network (issue 47). "
         f"{meta['frames']:,} training frames; the routes with `val_fraction` held out for validation. "
         "Neither LangAuto's evaluation routes nor the evaluation template banks are ever read.",
         "- Instructions: baseline phrasings only (baseline bank)"
@@ -129,8 +128,7 @@ def card(name: str, summary: dict, train_s: float | None, eval_cmd: str,
         f"AdamW, one-cycle lr {cfg['lr']}, seed {cfg['seed']}.",
         f"- Command: `bash tools/train_shipped.sh OUT {' '.join(meta['data'])}` (runs `python -m icrsumo "
         f"train icrsumo/learn/checkpoints/{name}.toml {' '.join('--data ' + d for d in meta['data'])} "
-        f"--out OUT/{name}`), on one NVIDIA H100 (the `device` tool), {models_at_once} models at once; "
-        f"{took}.",
+        f"--out OUT/{name}`), on {hardware}, {models_at_once} models at once; {took}.",
         f"- Validation at the end: waypoint L1 {val.get('waypoints', float('nan')):.3f} m, last point "
         f"error {val.get('final_wp_err', float('nan')):.2f} m, target-speed L1 "
         f"{val.get('speed', float('nan')):.2f} m/s, stop accuracy {val.get('stop_acc', float('nan')):.3f}, "
@@ -155,6 +153,8 @@ def main() -> None:
     ap.add_argument("--data", action="append", default=[],
                     help="FOLDER=TEXT: describe a data folder so (instead of the built-in description)")
     ap.add_argument("--at-once", default="three", help="how many models were trained at once (words)")
+    ap.add_argument("--hardware", default="one NVIDIA H100 (the `device` tool)",
+                    help="what the models were trained on (words)")
     args = ap.parse_args()
     DATA.update(dict(x.split("=", 1) for x in args.data))
     extra = []
@@ -166,7 +166,8 @@ def main() -> None:
     for p in sorted(CHECKPOINTS.glob("*.pt")):
         if args.only and p.stem not in args.only:
             continue
-        card_text = card(p.stem, summary, secs.get(p.stem), args.eval_command, extra, args.at_once)
+        card_text = card(p.stem, summary, secs.get(p.stem), args.eval_command, extra, args.at_once,
+                         args.hardware)
         notes = [t for n, t in (x.split("=", 1) for x in args.note) if n == p.stem]
         if notes:
             card_text += "\n" + "\n".join(["## Other measurements", "", *(f"{t}\n" for t in notes)])
