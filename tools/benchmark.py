@@ -21,7 +21,8 @@ with normal traffic, 12 traffic lights; converted exactly as ``icrsumo convert-r
   are excluded (they are reported separately as the episode setup).
 * **SUMO, ego moved** -- the SUMO-side floor of any closed loop: the same scenario with the ego
   under remote control, moved along the route-oracle's recorded trajectory by
-  ``vehicle.moveToXY(keepRoute=2)`` every step, with the subscriptions the runner uses.
+  ``vehicle.moveToXY(keepRoute=2)`` every step, with the subscriptions the runner uses; once
+  with the loop's lane search (``MATCH_RADIUS_M``) and once with SUMO's default (100 m).
 * **runner only** -- the closed loop (``icrsumo.sim.run_episode``) with a non-privileged agent
   whose ``act`` costs nothing: it replays the route-oracle's recorded actions, so the episode is
   the route-oracle's, byte for byte (checked), but no World view is built and no planning runs.
@@ -101,14 +102,17 @@ from pathlib import Path  # noqa: E402
 from icrsumo.agents.base import Action, EpisodeInfo, Observation  # noqa: E402
 from icrsumo.agents.registry import BUILTIN, DEFAULT_AGENT, make_agent  # noqa: E402
 from icrsumo.core.fsio import dumps_json  # noqa: E402
-from icrsumo.core.resources import bundled_suites  # noqa: E402
+from icrsumo.core.resources import bundled_suites, suite_coords  # noqa: E402
 from icrsumo.instructions.banks import load_banks  # noqa: E402
 from icrsumo.instructions.baseline import build_baseline  # noqa: E402
 from icrsumo.instructions.families import FAMILIES, make_variants  # noqa: E402
 from icrsumo.instructions.generate import GenerateOptions, generate, route_rng  # noqa: E402
 from icrsumo.instructions.maneuvers import extract_maneuvers, is_highway  # noqa: E402
 from icrsumo.instructions.store import read_instruction_sets, route_document  # noqa: E402
-from icrsumo.sim.backend import EGO_ID, SumoBackend, SumoSession, add_ego  # noqa: E402
+from icrsumo.sim.backend import EGO_ID, MATCH_RADIUS_M, SumoBackend, SumoSession, add_ego  # noqa: E402
+
+#: moveToXY's lane search radius (m) when none is given: SUMO's own default, for comparison
+SUMO_MATCH_RADIUS_M = 100.0
 from icrsumo.sim.callbacks import LoopTimer, LoopTimings  # noqa: E402
 from icrsumo.sim.episode import RunOptions, run_episode  # noqa: E402
 from icrsumo.world.convert import ConvertOptions, convert_routes  # noqa: E402
@@ -228,9 +232,10 @@ def bare_sumo(sc, n_steps: int) -> tuple[float, float]:
     return t1 - t0, (t2 - t1) / max(n_steps, 1)
 
 
-def sumo_moved_ego(sc, log, length: float) -> float:
+def sumo_moved_ego(sc, log, length: float, radius: float = MATCH_RADIUS_M) -> float:
     """s per step of SUMO with the ego moved along ``log``'s trajectory by moveToXY, inserted and
-    subscribed as the loop does (the backend's own setup), stepped on raw libsumo."""
+    subscribed as the loop does (the backend's own setup), stepped on raw libsumo; ``radius``:
+    moveToXY's lane search (m; the loop's by default, SUMO's own default is 100)."""
     poses = [(x + 0.5 * length * math.cos(h), y + 0.5 * length * math.sin(h), 90.0 - math.degrees(h))
              for x, y, h in zip(log.x, log.y, log.yaw)]
     with SumoBackend(sc) as backend:
@@ -241,7 +246,7 @@ def sumo_moved_ego(sc, log, length: float) -> float:
         move, step = ls.vehicle.moveToXY, ls.simulationStep
         t1 = time.perf_counter()
         for fx, fy, a in poses[1:]:
-            move(EGO_ID, "", -1, fx, fy, a, 2)
+            move(EGO_ID, "", -1, fx, fy, a, 2, radius)
             step()
         t2 = time.perf_counter()
     return (t2 - t1) / max(len(poses) - 1, 1)
@@ -277,9 +282,12 @@ def closed_loop(sc, baseline, agents: list[str], repeats: int, log=print) -> dic
     same_trajectory = None
     for rep in range(repeats):
         moved = sumo_moved_ego(sc, ref_log, length)
+        moved_wide = sumo_moved_ego(sc, ref_log, length, SUMO_MATCH_RADIUS_M)
         moved_bare = bare_sumo(sc, len(ref_log.t) - 1)[1]
         raw.setdefault("_moved", {}).setdefault("per_step", []).append(moved)
         raw["_moved"].setdefault("ratio", []).append(moved / moved_bare)
+        raw["_moved"].setdefault("wide_per_step", []).append(moved_wide)
+        raw["_moved"].setdefault("wide_ratio", []).append(moved_wide / moved_bare)
         for name in names:
             if name in errors:
                 continue
@@ -333,6 +341,8 @@ def closed_loop(sc, baseline, agents: list[str], repeats: int, log=print) -> dic
     bare_all = [v * ms for n in raw if n != "_moved" for v in raw[n]["bare"]]
     return {"agents": rows, "errors": errors, "sumo_moved_ego_ms_per_step": stats(moved),
             "sumo_moved_ego_ratio_to_bare": stats(raw["_moved"]["ratio"]),
+            "sumo_moved_ego_sumo_search_ms_per_step": stats([v * ms for v in raw["_moved"]["wide_per_step"]]),
+            "sumo_moved_ego_sumo_search_ratio_to_bare": stats(raw["_moved"]["wide_ratio"]),
             "bare_sumo_ms_per_step": stats(bare_all), "runner_only_same_trajectory": same_trajectory,
             "control_dt_s": dt * RunOptions().control_every, "step_length_s": dt}
 
@@ -571,6 +581,9 @@ def table(res: dict) -> str:
         f"| bare SUMO (ego driven by SUMO) | {_fmt(cl['bare_sumo_ms_per_step'])} | 1 | | | |",
         f"| SUMO, ego moved by moveToXY | {_fmt(cl['sumo_moved_ego_ms_per_step'])} | "
         f"{_fmt(cl['sumo_moved_ego_ratio_to_bare'], 2)} | | | |",
+        f"| SUMO, ego moved by moveToXY, SUMO's default lane search ({SUMO_MATCH_RADIUS_M:.0f} m) | "
+        f"{_fmt(cl['sumo_moved_ego_sumo_search_ms_per_step'])} | "
+        f"{_fmt(cl['sumo_moved_ego_sumo_search_ratio_to_bare'], 2)} | | | |",
     ]
     for name, r in cl["agents"].items():
         label = "runner only (replayed actions, non-privileged)" if name == RUNNER_ONLY else name
@@ -753,7 +766,9 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         src = _one_route_file(args.split, args.route, work) if args.quick else bundled_suites()[args.split]
         conv = work / "converted"
-        rep = convert_routes(src, conv, ConvertOptions(workers=min(2, os.cpu_count() or 1)))
+        # LangAuto's and CARLA's suites are in CARLA's frame (the suite says so), icrsumo's in SUMO's
+        rep = convert_routes(src, conv, ConvertOptions(coords=suite_coords(args.split) or "sumo",
+                                                       workers=min(2, os.cpu_count() or 1)))
         if rep.failures:
             log("\n".join(rep.failures))
         dirs = find_scenarios(conv)

@@ -351,3 +351,26 @@ def test_a_crash_in_the_loop_keeps_the_log_up_to_the_last_step(quiet):
     assert 0 < len(log.t) < len(full.t) and log.t == full.t[:len(log.t)]
     assert log.agent == "route-oracle+guard:breaks" and len(log.guard) == 1
     assert log.message.startswith("ValueError: guard broke at test_episode.py:")
+
+
+class StraightOn(RouteOracle):
+    """Drives straight ahead at 8 m/s whatever the road does: off the lanes, off the map."""
+
+    name = "straight-on"
+
+    def act(self, obs):
+        return Action(waypoints=np.array([[2.5 * (i + 1), 0.0] for i in range(8)]), target_speed=8.0)
+
+
+@pytest.mark.parametrize("rid, agent", [("tiny_005", RouteOracle), ("tiny_003", StraightOn)])
+def test_the_ego_lane_search_radius_changes_no_episode(quiet, monkeypatch, rid, agent):
+    """The ego is moved with a lane search of MATCH_RADIUS_M (50 m) instead of SUMO's default
+    100 m (issue 48: the search is a large part of moveToXY's cost): the same episodes, byte for
+    byte, for a drive along the route and for one that leaves every lane."""
+    from icrsumo.sim import backend
+
+    sc, sets = _load(quiet, "tiny", rid)
+    log = run_episode(sc, sets[0], agent())
+    assert log.termination == ("completed" if agent is RouteOracle else "route_deviation")
+    monkeypatch.setattr(backend, "MATCH_RADIUS_M", 100.0)
+    assert dumps_log(run_episode(sc, sets[0], agent())) == dumps_log(log)
