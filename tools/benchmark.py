@@ -110,9 +110,6 @@ from icrsumo.instructions.generate import GenerateOptions, generate, route_rng  
 from icrsumo.instructions.maneuvers import extract_maneuvers, is_highway  # noqa: E402
 from icrsumo.instructions.store import read_instruction_sets, route_document  # noqa: E402
 from icrsumo.sim.backend import EGO_ID, MATCH_RADIUS_M, SumoBackend, SumoSession, add_ego  # noqa: E402
-
-#: moveToXY's lane search radius (m) when none is given: SUMO's own default, for comparison
-SUMO_MATCH_RADIUS_M = 100.0
 from icrsumo.sim.callbacks import LoopTimer, LoopTimings  # noqa: E402
 from icrsumo.sim.episode import RunOptions, run_episode  # noqa: E402
 from icrsumo.world.convert import ConvertOptions, convert_routes  # noqa: E402
@@ -122,6 +119,8 @@ from icrsumo.world.scenario import find_scenarios, read_scenario  # noqa: E402
 #: CARLA reference point (issue 7): one LangAuto route with LMDrive on an RTX 3090
 CARLA_LMDRIVE_RT = 0.076
 RUNNER_ONLY = "runner-only"
+#: moveToXY's lane search radius (m) when none is given: SUMO's own default, for comparison
+SUMO_MATCH_RADIUS_M = 100.0
 #: the learned agents with torch inference (the rows and run "before" ONNX Runtime)
 TORCH_RUNTIME = Path(__file__).resolve().parents[1] / "benchmarks" / "torch_runtime.py"
 TORCH_SUFFIX = "-torch"

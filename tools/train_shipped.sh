@@ -16,7 +16,8 @@ export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}"
 gpus=$(python3 -c "import torch; print(max(torch.cuda.device_count(), 1))" 2>/dev/null || echo 1)
 i=0
 for n in ${MODELS:-bev-token bev-ngram bev-ngram-aug}; do
-  CUDA_VISIBLE_DEVICES=${CUDA_VISIBLE_DEVICES:-$((i % gpus))} python3 -m icrsumo train "icrsumo/learn/checkpoints/$n.toml" "${data[@]}" --out "$out/$n" \
+  CUDA_VISIBLE_DEVICES=${CUDA_VISIBLE_DEVICES:-$((i % gpus))} \
+    python3 -m icrsumo train "icrsumo/learn/checkpoints/$n.toml" "${data[@]}" --out "$out/$n" \
     > "$out/$n.log" 2>&1 &
   i=$((i + 1))
 done

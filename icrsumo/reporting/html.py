@@ -11,7 +11,7 @@ from pathlib import Path
 from icrsumo.core.fsio import write_atomic
 from icrsumo.core.types import EpisodeLog, EpisodeRecord, InstructionSet
 from icrsumo.results.summary import Summary
-from icrsumo.scoring import DEFAULT_SCORING, get_scoring
+from icrsumo.scoring import get_scoring
 
 from .html_route import Render, esc, route_section
 from .rows import ask_note, gain_note, table_cells
@@ -127,7 +127,7 @@ def html_report(summary: Summary, records: Sequence[EpisodeRecord], attribution:
     by_route: dict[str, list[EpisodeRecord]] = {}
     for r in records:
         by_route.setdefault(r.route_id, []).append(r)
-    sections, scoring = [], get_scoring(summary.scoring or DEFAULT_SCORING)
+    sections, scoring = [], get_scoring(summary.scoring)
     for route in sorted(by_route):
         route_sets = sets(route)
         sections.append(route_section(route, by_route[route], flipped, logs, route_sets, nets(route),

@@ -13,7 +13,7 @@ import numpy as np
 
 from icrsumo.core.types import EpisodeLog, EpisodeRecord, InstructionSet
 from icrsumo.core.vocab import Family
-from icrsumo.scoring import DEFAULT_SCORING, Scoring, get_scoring
+from icrsumo.scoring import Scoring, get_scoring
 
 from .trajectory import divergence_t, drawn_points
 
@@ -67,10 +67,6 @@ class _Frame:
         return bool(np.any(np.all((shape >= self.lo) & (shape <= self.hi), axis=1)))
 
 
-#: the rules whose penalised events are marked when a caller names none
-_SCORING = get_scoring(DEFAULT_SCORING)
-
-
 def _episode_svg(f: _Frame, rec: EpisodeRecord, log: EpisodeLog, out_kind: str, base: bool,
                  scoring: Scoring) -> list[str]:
     """One episode's trajectory, its end and its events."""
@@ -98,9 +94,10 @@ def _episode_svg(f: _Frame, rec: EpisodeRecord, log: EpisodeLog, out_kind: str, 
 
 
 def map_svg(net, logs: Sequence[tuple[EpisodeRecord, EpisodeLog, str]], base_keys: set[Key],
-            scoring: Scoring = _SCORING) -> str:
+            scoring: Scoring | None = None) -> str:
     """The route, the lanes around it and every episode's trajectory with its end and
-    infractions (the events ``scoring`` penalises), as an inline SVG."""
+    infractions (the events ``scoring`` penalises, None: the default scoring's), as an inline SVG."""
+    scoring = scoring or get_scoring()
     first = logs[0][1]
     route = np.asarray([p[:2] for p in first.route], dtype=float) if first.route else np.zeros((0, 2))
     every = [route] + [drawn_points(log) for _, log, _ in logs]
@@ -216,11 +213,12 @@ def _clips(draw: Render, with_kind: list[tuple[EpisodeRecord, EpisodeLog, str]],
 def route_section(route: str, records: Sequence[EpisodeRecord], flipped: set[Key],
                   logs: Callable[[EpisodeRecord], EpisodeLog | None],
                   sets: Mapping[tuple[str, int], InstructionSet], net, draw: Render | None,
-                  scoring: Scoring = _SCORING) -> str:
+                  scoring: Scoring | None = None) -> str:
     """The section of ``route``: its episodes ``records`` (``flipped``: the keys of the flips),
     ``logs(record)`` their stored logs, ``sets`` the route's instruction sequences by (family,
     k), ``net`` its RoadNet (None: no map), ``draw`` its map views (None: no clips); the
-    infractions marked are those the run's ``scoring`` penalises."""
+    infractions marked are those the run's ``scoring`` penalises (None: the default scoring)."""
+    scoring = scoring or get_scoring()
     recs = sorted(records, key=lambda r: (r.agent, r.family != Family.BASELINE, str(r.family), r.k))
     loaded = [(r, log) for r in recs if r.status == "done" and (log := logs(r)) is not None]
     log_of = {id(r): log for r, log in loaded}

@@ -11,7 +11,7 @@ import numpy as np
 from icrsumo.core.errors import visible
 from icrsumo.core.types import EpisodeLog, EpisodeRecord
 from icrsumo.results.store import ResultStore
-from icrsumo.scoring import DEFAULT_SCORING, Scoring, get_scoring
+from icrsumo.scoring import Scoring, get_scoring
 from icrsumo.world.convert import safe_name
 from icrsumo.world.scenario import find_scenarios, read_scenario
 
@@ -66,10 +66,6 @@ def _draw_map(ax, net, baseline_log: EpisodeLog, lo: np.ndarray, hi: np.ndarray)
                 solid_capstyle="round")
 
 
-#: the rules whose penalised events are marked when a caller names none
-_SCORING = get_scoring(DEFAULT_SCORING)
-
-
 def _draw_trajectory(ax, label: str, log: EpisodeLog, colour, scoring: Scoring) -> None:
     """One trajectory with its start, its end (and why it ended) and its penalised events; the
     baseline drawn wide underneath (an identical variant cannot hide it)."""
@@ -94,14 +90,16 @@ def _draw_trajectory(ax, label: str, log: EpisodeLog, colour, scoring: Scoring) 
 
 @plain_text
 def paired_rollout(net, baseline_log: EpisodeLog, variant_logs: list[tuple[str, EpisodeLog, str]],
-                   baseline_text: str, path: Path, title: str = "", scoring: Scoring = _SCORING) -> None:
+                   baseline_text: str, path: Path, title: str = "",
+                   scoring: Scoring | None = None) -> None:
     """The map's lanes around the trajectories (bounding box + 30 m), the route, the baseline
     trajectory (wide, underneath) and each counterfactual one (``(label, log, instruction
     text)``) with start (o) and end (X, with why it ended) markers and the events ``scoring``
-    penalises (*),
-    and the instruction texts as captions under the map, coloured like their lines."""
+    penalises (*; None: the default scoring's), and the instruction texts as captions under the
+    map, coloured like their lines."""
     from matplotlib import colormaps
 
+    scoring = scoring or get_scoring()
     cmap = colormaps["tab10"]
     trajs = [("baseline", baseline_log, baseline_text, "black")]
     trajs += [(label, log, text, cmap(i % 10)) for i, (label, log, text) in enumerate(variant_logs)]
@@ -158,7 +156,7 @@ def _variant(records: list[EpisodeRecord], store: ResultStore, base_log: Episode
 
 def rollout_figure(out: Path, store: ResultStore, records: list[EpisodeRecord], scenarios: Path,
                    instr_dir: Path, *, route: str | None, seed: int, families: tuple[str, ...],
-                   scoring: Scoring = _SCORING) -> None:
+                   scoring: Scoring | None = None) -> None:
     """Paired rollout figure: the baseline against one variant of each of ``families`` for one
     route and agent (``route``, default the first with a finished baseline; the agent of the
     first finished baseline episode): the first variant that failed (else k = 0)."""

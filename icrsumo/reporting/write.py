@@ -11,7 +11,7 @@ from icrsumo.core.fsio import dumps_json, write_atomic
 from icrsumo.core.types import EpisodeRecord
 from icrsumo.results.aggregate import EPISODE_COLUMNS, episode_table
 from icrsumo.results.summary import BASELINE, Summary
-from icrsumo.scoring import DEFAULT_SCORING, get_scoring
+from icrsumo.scoring import get_scoring
 from icrsumo.scoring.base import KeyPoints
 from icrsumo.scoring.leaderboard import Logs
 
@@ -27,7 +27,7 @@ def write_leaderboard(summary: Summary, records: Sequence[EpisodeRecord], out_di
     records, in the layout of the summary's scoring; ``key_points``: route id -> the route
     file's waypoints, where known; ``logs``: a crashed episode's stored log, where there is
     one (:meth:`icrsumo.scoring.Scoring.leaderboard_file`)."""
-    checkpoint = get_scoring(summary.scoring or DEFAULT_SCORING).leaderboard_file
+    checkpoint = get_scoring(summary.scoring).leaderboard_file
     for agent in summary.agents:
         for fam in [BASELINE, *summary.families]:
             cp = checkpoint(records, agent, fam, key_points=key_points, logs=logs)

@@ -32,10 +32,11 @@ def scoring_names() -> Sequence[str]:
     return [DEFAULT_SCORING] + sorted(n for n in SCORINGS if n != DEFAULT_SCORING)
 
 
-def get_scoring(name: str) -> Scoring:
-    """The scoring registered as ``name``; ValueError naming the known ones otherwise."""
+def get_scoring(name: str | None = None) -> Scoring:
+    """The scoring registered as ``name`` (None or "": :data:`DEFAULT_SCORING`); ValueError naming
+    the known ones otherwise."""
     try:
-        return SCORINGS[name]
+        return SCORINGS[name or DEFAULT_SCORING]
     except KeyError:
         raise ValueError(f"unknown scoring {name!r} (known: {', '.join(scoring_names())})") from None
 
