@@ -235,7 +235,7 @@ def bare_sumo(sc, n_steps: int) -> tuple[float, float]:
 def sumo_moved_ego(sc, log, length: float, radius: float = MATCH_RADIUS_M) -> float:
     """s per step of SUMO with the ego moved along ``log``'s trajectory by moveToXY, inserted and
     subscribed as the loop does (the backend's own setup), stepped on raw libsumo; ``radius``:
-    moveToXY's lane search (m; the loop's by default, SUMO's own default is 100)."""
+    moveToXY's lane search (m; default the loop's)."""
     poses = [(x + 0.5 * length * math.cos(h), y + 0.5 * length * math.sin(h), 90.0 - math.degrees(h))
              for x, y, h in zip(log.x, log.y, log.yaw)]
     with SumoBackend(sc) as backend:
