@@ -18,6 +18,8 @@ from icrsumo.learn import nets
 from icrsumo.learn.collect import CollectOptions, collect
 from icrsumo.learn.config import config_dict
 from icrsumo.learn.exact import checkpoint as xck
+from icrsumo.learn.exact import graph
+from icrsumo.learn.exact import model as exact_model
 from icrsumo.learn.exact.graph import EXACT_LIMIT
 from icrsumo.learn.exact.model import ExactPolicy
 from icrsumo.learn.exact.quantize import augmented_texts, calibration_frames, export_file
@@ -81,6 +83,57 @@ def test_fast_path_equals_the_int64_reference_bit_for_bit(exported):
             for i in range(0, n, 7):            # batch 1
                 got = _call(fast, frames, np.array([i]))
                 assert _same(got, {k: v[i:i + 1] for k, v in want.items()})
+
+
+def _dense_image(a, mm, bev):
+    """The image stage as the dense graph computes it: every patch and window multiplied."""
+    b, _, h, w = bev.shape
+    x = graph.requant(mm(graph.patches4(bev), "stem"), a["stem.m"], 0, float(a["c2.top"]))
+    x = graph.requant(mm(graph.im2col3s2(x, b, h // 4, w // 4), "c2"), a["c2.m"], 0, float(a["c3.top"]))
+    acc = mm(graph.im2col3s2(x, b, h // 8, w // 8), "c3")
+    return acc.reshape(b, h // 32, w // 32, -1)
+
+
+def test_empty_patches_skip_their_products_and_keep_the_bits(exported):
+    _, path, frames = exported
+    bev = frames[0]
+    for engine in (None, int64_engine):
+        policy = ExactPolicy(path, engine=engine)
+        a, mm = policy.arrays, policy.mm
+        drawn = graph.patches4(bev).any(axis=1)
+        assert 0.2 < 1 - drawn.mean() < 0.95        # the recorded frames have empty patches
+        full = np.full((2, *bev.shape[1:]), 255, np.uint8)
+        blank = np.zeros((2, *bev.shape[1:]), np.uint8)
+        for x in (bev[:64], full, blank, np.concatenate([blank[:1], bev[:1], full[:1]])):
+            assert graph.image(a, mm, x).tobytes() == _dense_image(a, mm, x).tobytes()
+        for i in range(0, len(bev), 5):
+            assert graph.image(a, mm, bev[i:i + 1]).tobytes() == _dense_image(a, mm, bev[i:i + 1]).tobytes()
+
+
+def test_a_repeated_bev_reuses_the_image_stage_with_the_same_bits(exported, monkeypatch):
+    _, path, frames = exported
+    bev, texts, speed, stopped = frames
+    calls = []
+    monkeypatch.setattr(exact_model, "image", lambda *a: calls.append(1) or graph.image(*a))
+    fresh, reusing = ExactPolicy(path, reuse=False), ExactPolicy(path)
+    # a frame, the same BEV again, again with other text and speed, a new frame, a batch
+    plan = [(0, 0, 0), (0, 0, 1), (0, 3, 2), (5, 5, 5), (5, 5, 5)]
+    mine = bev[0].copy()
+    computed = []
+    for b, t, s in plan:
+        x = mine[None] if b == 0 else bev[b:b + 1]
+        args = ([texts[t]], speed[s:s + 1], stopped[s:s + 1])
+        calls.clear()
+        got = reusing(x, *args)
+        computed.append(len(calls))
+        assert _same(got, fresh(x, *args))
+    assert computed == [1, 0, 0, 1, 0]          # a BEV equal to the call before's is reused
+    reusing(mine[None], *args)
+    mine[:, :16] = 255                          # the caller's array changed after its call
+    calls.clear()
+    assert _same(reusing(mine[None], *args), fresh(mine[None], *args)) and len(calls) == 2
+    idx = np.array([0, 0, 1])
+    assert _same(_call(reusing, frames, idx), _call(fresh, frames, idx))
 
 
 def test_exact_outputs_follow_the_float_network(exported):

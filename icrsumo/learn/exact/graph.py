@@ -79,28 +79,104 @@ def patches4(bev: np.ndarray) -> np.ndarray:
 def im2col3s2(rows: np.ndarray, b: int, h: int, w: int) -> np.ndarray:
     """NHWC rows ``(B*H*W, C)`` -> ``(B*H/2*W/2, 9*C)``: the 3x3 windows of a stride-2,
     padding-1 convolution, columns in the order (kh, kw, c)."""
-    c = rows.shape[1]
+    return windows3s2(rows, b, h, w).reshape(b * (h // 2) * (w // 2), 9 * rows.shape[-1])
+
+
+def windows3s2(rows: np.ndarray, b: int, h: int, w: int) -> np.ndarray:
+    """NHWC rows ``(B*H*W, C)`` (or ``(B, H, W, C)``) -> a read-only view ``(B, H/2, W/2, 3, 3, C)``
+    of the zero-padded input: the 3x3 window of each output of a stride-2, padding-1 convolution."""
+    c = rows.shape[-1]
     xp = np.zeros((b, h + 2, w + 2, c), dtype=rows.dtype)
     xp[:, 1:-1, 1:-1] = rows.reshape(b, h, w, c)
     s0, s1, s2, s3 = xp.strides
+    return as_strided(xp, (b, h // 2, w // 2, 3, 3, c), (s0, 2 * s1, 2 * s2, s1, s2, s3), writeable=False)
+
+
+@dataclass(frozen=True)
+class Background:
+    """What an all-zero BEV patch (nothing drawn in its 4x4 pixels) becomes at each stage of
+    :func:`image`, float32: the stem's row (C1,), the second convolution's row of a window of
+    nine such rows (C2,) and the third convolution's accumulator of nine of those (C3,)."""
+
+    stem: np.ndarray
+    c2: np.ndarray
+    c3: np.ndarray
+
+
+def background(a: Mapping[str, np.ndarray], mm: Engine) -> Background:
+    """The :class:`Background` rows of a checkpoint (three one-row products)."""
+    x1 = requant(mm(np.zeros((1, a["stem.w"].shape[0]), np.float32), "stem"), a["stem.m"], 0,
+                 float(a["c2.top"]))
+    x2 = requant(mm(np.tile(x1, (1, 9)), "c2"), a["c2.m"], 0, float(a["c3.top"]))
+    return Background(x1[0], x2[0], mm(np.tile(x2, (1, 9)), "c3")[0])
+
+
+def image(a: Mapping[str, np.ndarray], mm: Engine, bev: np.ndarray,
+          bg: Background | None = None) -> np.ndarray:
+    """The part of :func:`fuse` that reads the BEV alone: ``bev`` (B, 7, H, W) uint8 -> the third
+    convolution's accumulator before FiLM, (B, H/32, W/32, C3) float32 (integers).
+
+    Most of a BEV is empty (two thirds of its 4x4 patches off the road): a row whose inputs are
+    all background (an empty patch; a window of nine background rows, none of them padding) is
+    the :class:`Background` row (``bg``, computed here when None), and only the other rows are
+    multiplied. Every row of a product is an exact integer whichever rows it is computed with,
+    so the result is the same bits as the dense graph's."""
+    if bg is None:
+        bg = background(a, mm)
+    b, c, h, w = bev.shape
+    bev = np.ascontiguousarray(bev, dtype=np.uint8)
+    # a 4x4 patch is empty when no channel draws in it: OR the channels, then each patch row's
+    # four bytes as one uint32
+    drawn = np.bitwise_or.reduce(bev, axis=1).view(np.uint32).reshape(b, h // 4, 4, w // 4)
+    empty = ~drawn.any(axis=2)
+    flat = empty.reshape(-1)
+    p = patches4(bev)
+    if flat.any():
+        x = np.empty((len(p), len(bg.stem)), dtype=np.float32)
+        x[flat] = bg.stem
+        x[~flat] = requant(mm(p[~flat], "stem"), a["stem.m"], 0, float(a["c2.top"]))
+    else:
+        x = requant(mm(p, "stem"), a["stem.m"], 0, float(a["c2.top"]))
+    x, empty = _conv3s2(a, mm, x, empty, "c2", bg.c2)
+    acc, _ = _conv3s2(a, mm, x, empty, "c3", bg.c3, requantise=False)
+    return acc
+
+
+def _conv3s2(a: Mapping[str, np.ndarray], mm: Engine, rows: np.ndarray, empty: np.ndarray,
+             layer: str, bg_row: np.ndarray, requantise: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """A 3x3 stride-2 padding-1 convolution of NHWC ``rows`` (B, h, w, C) (or (B*h*w, C)) whose
+    rows marked in ``empty`` (B, h, w) are the background row -> its output (B, h/2, w/2, C')
+    (requantised for the next layer, or the raw accumulator) and the output's background mask:
+    the windows of nine background rows, which are ``bg_row`` without a product."""
+    b, h, w = empty.shape
+    c = rows.shape[-1]
     ho, wo = h // 2, w // 2
-    v = as_strided(xp, (b, ho, wo, 3, 3, c), (s0, 2 * s1, 2 * s2, s1, s2, s3), writeable=False)
-    return v.reshape(b * ho * wo, 9 * c)
+    win = windows3s2(rows, b, h, w)
+    # a window is background when its nine rows are (padding is not): AND three rows, then three columns
+    mp = np.zeros((b, h + 2, w + 2), dtype=bool)
+    mp[:, 1:-1, 1:-1] = empty
+    r = mp[:, 0:h:2] & mp[:, 1:h + 1:2] & mp[:, 2:h + 2:2]
+    out_empty = r[:, :, 0:w:2] & r[:, :, 1:w + 1:2] & r[:, :, 2:w + 2:2]
+    some = bool(out_empty.any())
+    live = ~out_empty
+    acc = mm(win[live].reshape(-1, 9 * c) if some else win.reshape(-1, 9 * c), layer)
+    if requantise:
+        nxt = PRODUCTS[PRODUCTS.index(layer) + 1]
+        acc = requant(acc, a[f"{layer}.m"], 0, float(a[f"{nxt}.top"]))
+    if not some:
+        return acc.reshape(b, ho, wo, acc.shape[1]), out_empty
+    out = np.empty((b, ho, wo, acc.shape[1]), dtype=np.float32)
+    out[out_empty] = bg_row
+    out[live] = acc
+    return out, out_empty
 
 
-def fuse(a: Mapping[str, np.ndarray], mm: Engine, bev: np.ndarray, lang: list[LangState],
-         speed: np.ndarray, stopped: np.ndarray) -> dict[str, np.ndarray]:
-    """The driving network: ``bev`` (B, 7, H, W) uint8, one :class:`LangState` per row,
-    ``speed`` m/s and ``stopped`` s (B,) -> ``waypoints`` (B, K, 2) m, ``speed`` (B,) m/s,
-    ``stop`` (B,) bool (stop logit > 0) and ``stop_logit`` (B,), all float32 but ``stop``."""
-    b, _, h, w = bev.shape
-    x = requant(mm(patches4(bev), "stem"), a["stem.m"], 0, float(a["c2.top"]))
-    h, w = h // 4, w // 4
-    x = requant(mm(im2col3s2(x, b, h, w), "c2"), a["c2.m"], 0, float(a["c3.top"]))
-    h, w = h // 2, w // 2
-    acc = mm(im2col3s2(x, b, h, w), "c3")
-    h, w = h // 2, w // 2
-    c3 = acc.shape[1]
+def modulated(a: Mapping[str, np.ndarray], mm: Engine, acc: np.ndarray,
+              lang: list[LangState]) -> np.ndarray:
+    """The part of :func:`fuse` that reads the image and the text: :func:`image`'s ``acc``
+    (B, h, w, C3), one :class:`LangState` per row -> the fully connected layer's activations
+    (B, F) float32 (integers 0..``mlp0.top``)."""
+    b, h, w, c3 = acc.shape
     film_m = np.stack([s.film_m for s in lang])[:, None, :]
     film_b = np.stack([s.film_b for s in lang])[:, None, :]
     y = np.multiply(acc.reshape(b, h * w, c3), film_m, dtype=np.float32)
@@ -108,7 +184,14 @@ def fuse(a: Mapping[str, np.ndarray], mm: Engine, bev: np.ndarray, lang: list[La
     np.rint(y, out=y)
     np.clip(y, 0, float(a["c4.top"]), out=y)
     x = requant(mm(im2col3s2(y.reshape(b * h * w, c3), b, h, w), "c4"), a["c4.m"], 0, float(a["fc.top"]))
-    x = requant(mm(x.reshape(b, -1), "fc"), a["fc.m"], 0, float(a["mlp0.top"]))
+    return requant(mm(x.reshape(b, -1), "fc"), a["fc.m"], 0, float(a["mlp0.top"]))
+
+
+def heads(a: Mapping[str, np.ndarray], mm: Engine, x: np.ndarray, lang: list[LangState],
+          speed: np.ndarray, stopped: np.ndarray) -> dict[str, np.ndarray]:
+    """The MLP and the output heads of :func:`fuse`: :func:`modulated`'s ``x`` (B, F), the
+    texts' states, ``speed`` m/s and ``stopped`` s (B,) -> :func:`fuse`'s outputs."""
+    b = x.shape[0]
     # first MLP layer: image part (a product), language part (per text), speed and stop time
     sp = np.divide(np.asarray(speed, np.float32), np.float32(10.0), dtype=np.float32)
     st = np.divide(np.asarray(stopped, np.float32), np.float32(5.0), dtype=np.float32)
