@@ -91,10 +91,10 @@ def _dense_image(a, mm, bev):
     x = graph.requant(mm(graph.patches4(bev), "stem"), a["stem.m"], 0, float(a["c2.top"]))
     x = graph.requant(mm(graph.im2col3s2(x, b, h // 4, w // 4), "c2"), a["c2.m"], 0, float(a["c3.top"]))
     acc = mm(graph.im2col3s2(x, b, h // 8, w // 8), "c3")
-    return acc.reshape(b, h // 32, w // 32, -1)
+    return acc.reshape(b, h // 16, w // 16, -1)
 
 
-def test_empty_patches_skip_their_products_and_keep_the_bits(exported):
+def test_only_new_rows_are_multiplied_and_the_bits_stay_the_dense_graphs(exported):
     _, path, frames = exported
     bev = frames[0]
     for engine in (None, int64_engine):
@@ -105,33 +105,53 @@ def test_empty_patches_skip_their_products_and_keep_the_bits(exported):
         full = np.full((2, *bev.shape[1:]), 255, np.uint8)
         blank = np.zeros((2, *bev.shape[1:]), np.uint8)
         for x in (bev[:64], full, blank, np.concatenate([blank[:1], bev[:1], full[:1]])):
-            assert graph.image(a, mm, x).tobytes() == _dense_image(a, mm, x).tobytes()
-        for i in range(0, len(bev), 5):
-            assert graph.image(a, mm, bev[i:i + 1]).tobytes() == _dense_image(a, mm, bev[i:i + 1]).tobytes()
+            assert graph.image(a, mm, x).acc.tobytes() == _dense_image(a, mm, x).tobytes()
+        before = None
+        for i in range(0, len(bev), 3):             # each from the frame before (most of them close)
+            x = bev[i:i + 1]
+            if i % 2:                               # and a few pixels drawn or erased
+                x = x.copy()
+                x[0, i % 7, 40:43, 60 + i % 9:64 + i % 9] ^= 255
+            got = graph.image(a, mm, x, before=before)
+            assert got.acc.tobytes() == _dense_image(a, mm, x).tobytes()
+            before = got
 
 
-def test_a_repeated_bev_reuses_the_image_stage_with_the_same_bits(exported, monkeypatch):
+def _counting(rows):
+    """An engine factory whose products append (layer, rows multiplied) to ``rows``."""
+    def make(arrays):
+        inner = exact_model.FloatEngine(arrays)
+
+        def mm(x, layer):
+            rows.append((layer, len(x)))
+            return inner(x, layer)
+        return mm
+    return make
+
+
+def test_a_call_starts_from_the_call_before_with_the_same_bits(exported):
     _, path, frames = exported
     bev, texts, speed, stopped = frames
-    calls = []
-    monkeypatch.setattr(exact_model, "image", lambda *a: calls.append(1) or graph.image(*a))
-    fresh, reusing = ExactPolicy(path, reuse=False), ExactPolicy(path)
-    # a frame, the same BEV again, again with other text and speed, a new frame, a batch
-    plan = [(0, 0, 0), (0, 0, 1), (0, 3, 2), (5, 5, 5), (5, 5, 5)]
+    rows = []
+    fresh, reusing = ExactPolicy(path, reuse=False), ExactPolicy(path, engine=_counting(rows))
     mine = bev[0].copy()
-    computed = []
-    for b, t, s in plan:
-        x = mine[None] if b == 0 else bev[b:b + 1]
+    touched = mine.copy()
+    touched[2, 60:62, 60:62] = 255                 # one vehicle pixel more, near the middle
+    # a frame; the same BEV again; with other text and speed; the BEV touched; a new frame, twice
+    plan = [(mine, 0, 0), (mine, 0, 1), (mine, 3, 2), (touched, 3, 2), (bev[5], 5, 5), (bev[5], 5, 5)]
+    image_rows = []
+    for x, t, s in plan:
         args = ([texts[t]], speed[s:s + 1], stopped[s:s + 1])
-        calls.clear()
-        got = reusing(x, *args)
-        computed.append(len(calls))
-        assert _same(got, fresh(x, *args))
-    assert computed == [1, 0, 0, 1, 0]          # a BEV equal to the call before's is reused
+        rows.clear()
+        got = reusing(x[None], *args)
+        image_rows.append(sum(n for layer, n in rows if layer in ("stem", "c2", "c3")))
+        assert _same(got, fresh(x[None], *args))
+    dense = 32 * 32 + 16 * 16 + 8 * 8
+    assert 0 < image_rows[0] < dense and image_rows[1] == image_rows[2] == image_rows[5] == 0
+    assert 0 < image_rows[3] <= 1 + 4 + 4         # one patch, the windows that hold it
     reusing(mine[None], *args)
-    mine[:, :16] = 255                          # the caller's array changed after its call
-    calls.clear()
-    assert _same(reusing(mine[None], *args), fresh(mine[None], *args)) and len(calls) == 2
+    mine[:, :16] = 255                             # the caller's array changed after its call
+    assert _same(reusing(mine[None], *args), fresh(mine[None], *args))
     idx = np.array([0, 0, 1])
     assert _same(_call(reusing, frames, idx), _call(fresh, frames, idx))
 

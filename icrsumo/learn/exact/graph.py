@@ -111,64 +111,106 @@ def background(a: Mapping[str, np.ndarray], mm: Engine) -> Background:
     return Background(x1[0], x2[0], mm(np.tile(x2, (1, 9)), "c3")[0])
 
 
-def image(a: Mapping[str, np.ndarray], mm: Engine, bev: np.ndarray,
-          bg: Background | None = None) -> np.ndarray:
-    """The part of :func:`fuse` that reads the BEV alone: ``bev`` (B, 7, H, W) uint8 -> the third
-    convolution's accumulator before FiLM, (B, H/32, W/32, C3) float32 (integers).
+@dataclass(frozen=True)
+class Image:
+    """What :func:`image` computed for a BEV, kept so that the next call can start from it: the
+    BEV (B, 7, H, W) uint8, the stem's rows (B, H/4, W/4, C1), the second convolution's
+    (B, H/8, W/8, C2) and the third convolution's accumulator before FiLM ``acc``
+    (B, H/16, W/16, C3), all float32 integers but the BEV. Never written to."""
 
-    Most of a BEV is empty (two thirds of its 4x4 patches off the road): a row whose inputs are
-    all background (an empty patch; a window of nine background rows, none of them padding) is
-    the :class:`Background` row (``bg``, computed here when None), and only the other rows are
-    multiplied. Every row of a product is an exact integer whichever rows it is computed with,
-    so the result is the same bits as the dense graph's."""
+    bev: np.ndarray
+    stem: np.ndarray
+    c2: np.ndarray
+    acc: np.ndarray
+
+
+def image(a: Mapping[str, np.ndarray], mm: Engine, bev: np.ndarray, bg: Background | None = None,
+          before: Image | None = None) -> Image:
+    """The part of :func:`fuse` that reads the BEV alone: ``bev`` (B, 7, H, W) uint8 -> its
+    :class:`Image` (``acc``: what :func:`modulated` reads).
+
+    Only rows whose inputs are new are multiplied; every row of a product is an exact integer
+    whichever rows it is computed with, so the result is the same bits as the dense graph's:
+
+    * most of a BEV is empty (two thirds of its 4x4 patches off the road): a row whose inputs are
+      all background (an empty patch; a window of nine background rows, none of them padding) is
+      the :class:`Background` row (``bg``, computed here when None);
+    * given ``before`` (an earlier call's Image, of a BEV of the same shape), a row whose inputs
+      are the same as there (the patch's pixels; the window's nine rows) is its row there: an
+      ego standing still sees most of its raster again. The same BEV returns ``before`` itself;
+      when more than half of the patches changed (an ego that moves), ``before`` is not used."""
     if bg is None:
         bg = background(a, mm)
-    b, c, h, w = bev.shape
+    b, _, h, w = bev.shape
     bev = np.ascontiguousarray(bev, dtype=np.uint8)
-    # a 4x4 patch is empty when no channel draws in it: OR the channels, then each patch row's
-    # four bytes as one uint32
-    drawn = np.bitwise_or.reduce(bev, axis=1).view(np.uint32).reshape(b, h // 4, 4, w // 4)
-    empty = ~drawn.any(axis=2)
-    flat = empty.reshape(-1)
-    p = patches4(bev)
-    if flat.any():
-        x = np.empty((len(p), len(bg.stem)), dtype=np.float32)
-        x[flat] = bg.stem
-        x[~flat] = requant(mm(p[~flat], "stem"), a["stem.m"], 0, float(a["c2.top"]))
-    else:
-        x = requant(mm(p, "stem"), a["stem.m"], 0, float(a["c2.top"]))
-    x, empty = _conv3s2(a, mm, x, empty, "c2", bg.c2)
-    acc, _ = _conv3s2(a, mm, x, empty, "c3", bg.c3, requantise=False)
-    return acc
+    empty = ~_drawn(bev)
+    changed = None
+    if before is not None and before.bev.shape == bev.shape:
+        changed = _drawn(np.bitwise_xor(bev, before.bev))
+        n = int(np.count_nonzero(changed))
+        if n == 0:
+            return before
+        if 2 * n > changed.size:
+            changed = None
+    old = (before.stem, before.c2, before.acc) if changed is not None else (None, None, None)
+    p = patches4(bev).reshape(b, h // 4, w // 4, -1)
+    x = _rows(a, mm, p, empty, changed, old[0], "stem", bg.stem)
+    empty, changed = _pool(empty, changed)
+    x2 = _rows(a, mm, windows3s2(x, b, h // 4, w // 4), empty, changed, old[1], "c2", bg.c2)
+    empty, changed = _pool(empty, changed)
+    acc = _rows(a, mm, windows3s2(x2, b, h // 8, w // 8), empty, changed, old[2], "c3", bg.c3,
+                requantise=False)
+    return Image(bev.copy(), x, x2, acc)
 
 
-def _conv3s2(a: Mapping[str, np.ndarray], mm: Engine, rows: np.ndarray, empty: np.ndarray,
-             layer: str, bg_row: np.ndarray, requantise: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """A 3x3 stride-2 padding-1 convolution of NHWC ``rows`` (B, h, w, C) (or (B*h*w, C)) whose
-    rows marked in ``empty`` (B, h, w) are the background row -> its output (B, h/2, w/2, C')
-    (requantised for the next layer, or the raw accumulator) and the output's background mask:
-    the windows of nine background rows, which are ``bg_row`` without a product."""
+def _drawn(bev: np.ndarray) -> np.ndarray:
+    """(B, 7, H, W) uint8 -> (B, H/4, W/4) bool: whether any channel has a non-zero pixel in the
+    4x4 patch (the channels ORed, then each patch row's four bytes as one uint32)."""
+    b, _, h, w = bev.shape
+    return np.bitwise_or.reduce(bev, axis=1).view(np.uint32).reshape(b, h // 4, 4, w // 4).any(axis=2)
+
+
+def _pool(empty: np.ndarray, changed: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """The masks (B, h, w) of a layer's rows -> those of a 3x3 stride-2 padding-1 convolution's
+    outputs (B, h/2, w/2): empty when all nine rows of the window are (padding is not), changed
+    when any is (padding never is). Three rows, then three columns, at a time."""
     b, h, w = empty.shape
-    c = rows.shape[-1]
-    ho, wo = h // 2, w // 2
-    win = windows3s2(rows, b, h, w)
-    # a window is background when its nine rows are (padding is not): AND three rows, then three columns
-    mp = np.zeros((b, h + 2, w + 2), dtype=bool)
-    mp[:, 1:-1, 1:-1] = empty
-    r = mp[:, 0:h:2] & mp[:, 1:h + 1:2] & mp[:, 2:h + 2:2]
-    out_empty = r[:, :, 0:w:2] & r[:, :, 1:w + 1:2] & r[:, :, 2:w + 2:2]
-    some = bool(out_empty.any())
-    live = ~out_empty
-    acc = mm(win[live].reshape(-1, 9 * c) if some else win.reshape(-1, 9 * c), layer)
+    out = []
+    for mask, op in ((empty, np.logical_and), (changed, np.logical_or)):
+        if mask is None:
+            out.append(None)
+            continue
+        mp = np.zeros((b, h + 2, w + 2), dtype=bool)
+        mp[:, 1:-1, 1:-1] = mask
+        r = op(op(mp[:, 0:h:2], mp[:, 1:h + 1:2]), mp[:, 2:h + 2:2])
+        out.append(op(op(r[:, :, 0:w:2], r[:, :, 1:w + 1:2]), r[:, :, 2:w + 2:2]))
+    return out[0], out[1]
+
+
+def _rows(a: Mapping[str, np.ndarray], mm: Engine, cols: np.ndarray, empty: np.ndarray,
+          changed: np.ndarray | None, before: np.ndarray | None, layer: str, bg_row: np.ndarray,
+          requantise: bool = True) -> np.ndarray:
+    """The output rows (B, h, w, C') of ``layer`` whose inputs are ``cols`` (B, h, w, ...), one
+    output row's inputs each: an ``empty`` row is ``bg_row``; given ``changed`` and ``before``,
+    a row not changed is ``before``'s; the others are multiplied (and requantised for the next
+    layer, or left as the raw accumulator)."""
+    b, h, w = empty.shape
+    todo = ~empty if changed is None else changed & ~empty
+    dense = changed is None and bool(todo.all())
+    acc = mm(cols.reshape(b * h * w, -1) if dense else cols[todo].reshape(-1, cols[0, 0, 0].size), layer)
     if requantise:
         nxt = PRODUCTS[PRODUCTS.index(layer) + 1]
         acc = requant(acc, a[f"{layer}.m"], 0, float(a[f"{nxt}.top"]))
-    if not some:
-        return acc.reshape(b, ho, wo, acc.shape[1]), out_empty
-    out = np.empty((b, ho, wo, acc.shape[1]), dtype=np.float32)
-    out[out_empty] = bg_row
-    out[live] = acc
-    return out, out_empty
+    if dense:
+        return acc.reshape(b, h, w, -1)
+    if changed is None:
+        out = np.empty((b, h, w, len(bg_row)), dtype=np.float32)
+        out[empty] = bg_row
+    else:
+        out = before.copy()
+        out[empty & changed] = bg_row
+    out[todo] = acc
+    return out
 
 
 def modulated(a: Mapping[str, np.ndarray], mm: Engine, acc: np.ndarray,

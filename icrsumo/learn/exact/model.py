@@ -3,11 +3,12 @@
 blocking or thread count: the products are sums of integers below 2**24, exact in any order).
 A batch runs as one product per layer; its rows are bitwise those of single calls.
 
-A single call whose BEV is byte for byte the previous single call's (an ego standing still in a
-scene that does not move: a third of the default ICR run's calls) reuses that call's image stage
-(:func:`icrsumo.learn.exact.graph.image`, three quarters of the products), and with the same text
-too its modulated stage: the same arrays the graph would compute again, so the outputs are the
-same bits (``reuse=False`` computes everything, for timing)."""
+A single call starts from the previous single call: the rows of the image stage
+(:func:`icrsumo.learn.exact.graph.image`, three quarters of the products) whose pixels did not
+change are that call's (an ego standing still sees most of its raster again), and a BEV byte for
+byte the same (a third of the default ICR run's calls) with the same text reuses the modulated
+stage too: the same arrays the graph would compute again, so the outputs are the same bits
+(``reuse=False`` starts every call afresh, for timing)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .checkpoint import ExactCheckpoint, load
-from .graph import PRODUCTS, LangState, background, heads, image, language, modulated
+from .graph import PRODUCTS, Image, LangState, background, heads, image, language, modulated
 
 #: distinct texts whose language state is kept (then the cache starts over)
 LANG_CACHE = 4096
@@ -52,7 +53,7 @@ class ExactPolicy:
     ``stop`` (B,) bool and ``stop_logit`` (B,). ``engine`` replaces the float32 products (the
     int64 reference: :func:`icrsumo.learn.exact.reference.int64_engine`); ``threads`` limits
     numpy's BLAS threads in the process (:func:`limit_blas_threads`; None leaves them);
-    ``reuse``: a single call with the previous single call's BEV reuses its stages (the module's
+    ``reuse``: a single call starts from the previous single call's stages (the module's
     docstring)."""
 
     def __init__(self, path: Path | str | ExactCheckpoint, engine=None, threads: int | None = 1,
@@ -67,8 +68,8 @@ class ExactPolicy:
         self._lang: dict[str, LangState] = {}
         self.reuse = bool(reuse)
         self._bg = background(self.arrays, self.mm)
-        #: the previous single call: its BEV (a copy), text, image and modulated stages
-        self._last: tuple[np.ndarray, str, np.ndarray, np.ndarray] | None = None
+        #: the previous single call: its image stage (with its BEV), text and modulated stage
+        self._last: tuple[Image, str, np.ndarray] | None = None
 
     def language(self, texts: list[str]) -> list[LangState]:
         """The :class:`LangState` of each text (computed once per distinct text, alone)."""
@@ -88,13 +89,12 @@ class ExactPolicy:
         lang = self.language(texts)
         a, mm, last = self.arrays, self.mm, self._last
         single = self.reuse and len(bev) == 1
-        if single and last is not None and np.array_equal(bev, last[0]):
-            acc = last[2]
-            x = last[3] if texts[0] == last[1] else modulated(a, mm, acc, lang)
-            self._last = (last[0], texts[0], acc, x)
+        img = image(a, mm, bev, self._bg, last[0] if single and last is not None else None)
+        if single and last is not None and img is last[0] and texts[0] == last[1]:
+            x = last[2]
         else:
-            acc = image(a, mm, bev, self._bg)
-            x = modulated(a, mm, acc, lang)
-            self._last = (bev.copy(), texts[0], acc, x) if single else last
+            x = modulated(a, mm, img.acc, lang)
+        if single:
+            self._last = (img, texts[0], x)
         return heads(a, mm, x, lang, np.asarray(speed, np.float32).reshape(-1),
                      np.asarray(stopped, np.float32).reshape(-1))
