@@ -25,6 +25,7 @@ import argparse
 import dataclasses
 import itertools
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +36,7 @@ from policy_latency import median_ms  # noqa: E402
 
 from icrsumo.learn.agent import CHECKPOINTS  # noqa: E402
 from icrsumo.learn.exact.checkpoint import ExactCheckpoint, layout, load  # noqa: E402
-from icrsumo.learn.exact.graph import patches4  # noqa: E402
+from icrsumo.learn.exact.graph import drawn  # noqa: E402
 from icrsumo.learn.exact.model import ExactPolicy  # noqa: E402
 
 
@@ -95,8 +96,6 @@ def recorded(folder: Path, limit: int) -> tuple[list[np.ndarray], list[str], np.
 def in_order_ms(policy: ExactPolicy, frames: list[np.ndarray], texts: list[str], speed: np.ndarray,
                 stopped: np.ndarray, repeats: int = 5) -> float:
     """Median over ``repeats`` passes of the mean ms of one batch-1 call, the frames in order."""
-    import time
-
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -125,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
         except InputError as err:
             print(f"exact_width: {err}", file=sys.stderr)
             return 2
-        empty = 1.0 - float(np.mean([patches4(f[None]).any(axis=1).mean() for f in frames]))
+        empty = 1.0 - float(np.mean([drawn(f[None]).mean() for f in frames]))
         fresh = in_order_ms(ExactPolicy(shipped, reuse=False), frames, texts, speed, stopped)
         before = in_order_ms(ExactPolicy(shipped), frames, texts, speed, stopped)
         print(f"{a.agent} on {len(frames)} recorded frames in order ({100 * empty:.1f} % of the BEV "

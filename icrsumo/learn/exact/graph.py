@@ -19,6 +19,7 @@ distinct text, :func:`language`) is computed in int64 (exact in any order) and g
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
@@ -116,7 +117,8 @@ class Image:
     """What :func:`image` computed for a BEV, kept so that the next call can start from it: the
     BEV (B, 7, H, W) uint8, the stem's rows (B, H/4, W/4, C1), the second convolution's
     (B, H/8, W/8, C2) and the third convolution's accumulator before FiLM ``acc``
-    (B, H/16, W/16, C3), all float32 integers but the BEV. Never written to."""
+    (B, H/16, W/16, C3), all float32 integers but the BEV (the array given to :func:`image`,
+    which its caller must not change while the Image is kept). Never written to."""
 
     bev: np.ndarray
     stem: np.ndarray
@@ -143,10 +145,10 @@ def image(a: Mapping[str, np.ndarray], mm: Engine, bev: np.ndarray, bg: Backgrou
         bg = background(a, mm)
     b, _, h, w = bev.shape
     bev = np.ascontiguousarray(bev, dtype=np.uint8)
-    empty = ~_drawn(bev)
+    empty = ~drawn(bev)
     changed = None
     if before is not None and before.bev.shape == bev.shape:
-        changed = _drawn(np.bitwise_xor(bev, before.bev))
+        changed = drawn(np.bitwise_xor(bev, before.bev))
         n = int(np.count_nonzero(changed))
         if n == 0:
             return before
@@ -155,36 +157,39 @@ def image(a: Mapping[str, np.ndarray], mm: Engine, bev: np.ndarray, bg: Backgrou
     old = (before.stem, before.c2, before.acc) if changed is not None else (None, None, None)
     p = patches4(bev).reshape(b, h // 4, w // 4, -1)
     x = _rows(a, mm, p, empty, changed, old[0], "stem", bg.stem)
-    empty, changed = _pool(empty, changed)
+    empty, changed = _windows_all(empty), _windows_any(changed)
     x2 = _rows(a, mm, windows3s2(x, b, h // 4, w // 4), empty, changed, old[1], "c2", bg.c2)
-    empty, changed = _pool(empty, changed)
+    empty, changed = _windows_all(empty), _windows_any(changed)
     acc = _rows(a, mm, windows3s2(x2, b, h // 8, w // 8), empty, changed, old[2], "c3", bg.c3,
                 requantise=False)
-    return Image(bev.copy(), x, x2, acc)
+    return Image(bev, x, x2, acc)
 
 
-def _drawn(bev: np.ndarray) -> np.ndarray:
+def drawn(bev: np.ndarray) -> np.ndarray:
     """(B, 7, H, W) uint8 -> (B, H/4, W/4) bool: whether any channel has a non-zero pixel in the
     4x4 patch (the channels ORed, then each patch row's four bytes as one uint32)."""
     b, _, h, w = bev.shape
     return np.bitwise_or.reduce(bev, axis=1).view(np.uint32).reshape(b, h // 4, 4, w // 4).any(axis=2)
 
 
-def _pool(empty: np.ndarray, changed: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
-    """The masks (B, h, w) of a layer's rows -> those of a 3x3 stride-2 padding-1 convolution's
-    outputs (B, h/2, w/2): empty when all nine rows of the window are (padding is not), changed
-    when any is (padding never is). Three rows, then three columns, at a time."""
-    b, h, w = empty.shape
-    out = []
-    for mask, op in ((empty, np.logical_and), (changed, np.logical_or)):
-        if mask is None:
-            out.append(None)
-            continue
-        mp = np.zeros((b, h + 2, w + 2), dtype=bool)
-        mp[:, 1:-1, 1:-1] = mask
-        r = op(op(mp[:, 0:h:2], mp[:, 1:h + 1:2]), mp[:, 2:h + 2:2])
-        out.append(op(op(r[:, :, 0:w:2], r[:, :, 1:w + 1:2]), r[:, :, 2:w + 2:2]))
-    return out[0], out[1]
+def _windows(mask: np.ndarray, op: np.ufunc) -> np.ndarray:
+    """A layer's row mask (B, h, w) -> ``op`` over each 3x3 stride-2 window of the zero-padded
+    mask, (B, h/2, w/2): three rows, then three columns, at a time."""
+    b, h, w = mask.shape
+    mp = np.zeros((b, h + 2, w + 2), dtype=bool)
+    mp[:, 1:-1, 1:-1] = mask
+    r = op(op(mp[:, 0:h:2], mp[:, 1:h + 1:2]), mp[:, 2:h + 2:2])
+    return op(op(r[:, :, 0:w:2], r[:, :, 1:w + 1:2]), r[:, :, 2:w + 2:2])
+
+
+def _windows_all(empty: np.ndarray) -> np.ndarray:
+    """The next layer's empty rows: windows whose nine rows are all empty (padding is not)."""
+    return _windows(empty, np.logical_and)
+
+
+def _windows_any(changed: np.ndarray | None) -> np.ndarray | None:
+    """The next layer's changed rows: windows with any changed row (padding never is)."""
+    return None if changed is None else _windows(changed, np.logical_or)
 
 
 def _rows(a: Mapping[str, np.ndarray], mm: Engine, cols: np.ndarray, empty: np.ndarray,
@@ -197,7 +202,8 @@ def _rows(a: Mapping[str, np.ndarray], mm: Engine, cols: np.ndarray, empty: np.n
     b, h, w = empty.shape
     todo = ~empty if changed is None else changed & ~empty
     dense = changed is None and bool(todo.all())
-    acc = mm(cols.reshape(b * h * w, -1) if dense else cols[todo].reshape(-1, cols[0, 0, 0].size), layer)
+    k = math.prod(cols.shape[3:])                  # one output row's inputs
+    acc = mm(cols.reshape(b * h * w, k) if dense else cols[todo].reshape(-1, k), layer)
     if requantise:
         nxt = PRODUCTS[PRODUCTS.index(layer) + 1]
         acc = requant(acc, a[f"{layer}.m"], 0, float(a[f"{nxt}.top"]))

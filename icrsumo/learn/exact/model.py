@@ -89,11 +89,12 @@ class ExactPolicy:
         lang = self.language(texts)
         a, mm, last = self.arrays, self.mm, self._last
         single = self.reuse and len(bev) == 1
-        img = image(a, mm, bev, self._bg, last[0] if single and last is not None else None)
-        if single and last is not None and img is last[0] and texts[0] == last[1]:
-            x = last[2]
-        else:
-            x = modulated(a, mm, img.acc, lang)
+        if single:  # kept for the next call: a copy the caller cannot change
+            bev = bev.copy()
+        before = last[0] if single and last is not None else None
+        img = image(a, mm, bev, self._bg, before)
+        x = last[2] if before is not None and img is before and texts[0] == last[1] else \
+            modulated(a, mm, img.acc, lang)
         if single:
             self._last = (img, texts[0], x)
         return heads(a, mm, x, lang, np.asarray(speed, np.float32).reshape(-1),
