@@ -117,6 +117,15 @@ def test_only_new_rows_are_multiplied_and_the_bits_stay_the_dense_graphs(exporte
             before = got
 
 
+def test_fuse_is_the_three_stages_in_one_call(exported):
+    _, path, frames = exported
+    bev, texts, speed, stopped = frames
+    policy = ExactPolicy(path, reuse=False)
+    got = graph.fuse(policy.arrays, policy.mm, bev[:16], policy.language(texts[:16]), speed[:16],
+                     stopped[:16])
+    assert _same(got, _call(policy, frames, np.arange(16)))
+
+
 def _counting(rows):
     """An engine factory whose products append (layer, rows multiplied) to ``rows``."""
     def make(arrays):

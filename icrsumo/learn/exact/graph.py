@@ -93,6 +93,17 @@ def windows3s2(rows: np.ndarray, b: int, h: int, w: int) -> np.ndarray:
     return as_strided(xp, (b, h // 2, w // 2, 3, 3, c), (s0, 2 * s1, 2 * s2, s1, s2, s3), writeable=False)
 
 
+def fuse(a: Mapping[str, np.ndarray], mm: Engine, bev: np.ndarray, lang: list[LangState],
+         speed: np.ndarray, stopped: np.ndarray) -> dict[str, np.ndarray]:
+    """The driving network: ``bev`` (B, 7, H, W) uint8, one :class:`LangState` per row,
+    ``speed`` m/s and ``stopped`` s (B,) -> ``waypoints`` (B, K, 2) m, ``speed`` (B,) m/s,
+    ``stop`` (B,) bool (stop logit > 0) and ``stop_logit`` (B,), all float32 but ``stop``.
+    Its three stages, in order: :func:`image` (the BEV alone), :func:`modulated` (with the
+    text), :func:`heads` (with the speed and the stop time); :class:`icrsumo.learn.exact.model.
+    ExactPolicy` runs them itself to carry stages from one call to the next."""
+    return heads(a, mm, modulated(a, mm, image(a, mm, bev).acc, lang), lang, speed, stopped)
+
+
 @dataclass(frozen=True)
 class Background:
     """What an all-zero BEV patch (nothing drawn in its 4x4 pixels) becomes at each stage of
