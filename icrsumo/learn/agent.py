@@ -9,7 +9,9 @@ float one (``.pt``, read with ``weights_only=True``) in :class:`icrsumo.learn.ne
 above 0.5. It remembers the time it has been stopped (:class:`icrsumo.learn.labels.StopClock`)
 and, with ``memory`` on (the default), what it has done under the active instruction: the turn or
 lane change already driven, the distance come since it arrived
-(:class:`icrsumo.learn.memory.InstructionMemory`, which chooses the text the network reads).
+(:class:`icrsumo.learn.memory.InstructionMemory`, which chooses the text the network reads);
+with ``creep`` on (the default) it drives on where its network would stand still for good with
+nothing to wait for in view (:class:`icrsumo.learn.creep.Creep`).
 ``act_batch`` runs several episodes' observations in one forward pass per checkpoint, device and
 runtime (:func:`act_batch`, used by batched serving). The inference device is a constructor
 argument (``device``: cpu by default, cuda, cuda:N, auto).
@@ -33,6 +35,7 @@ import numpy as np
 from icrsumo.agents.base import Action, EpisodeInfo, Observation
 from icrsumo.core.errors import InputError
 
+from .creep import Creep
 from .labels import StopClock
 from .memory import InstructionMemory
 
@@ -94,36 +97,46 @@ class LearnedAgent:
     on ``device`` (cpu, cuda, cuda:N, auto); on the CPU in ``runtime`` ``onnx`` (ONNX Runtime,
     the default) or ``torch`` (:class:`icrsumo.learn.nets.policy.Policy`). ``memory``: the
     network reads the text :class:`icrsumo.learn.memory.InstructionMemory` chooses (True, the
-    default) or the active instruction as it stands (False: the agents before issue 47)."""
+    default) or the active instruction as it stands (False: the agents before issue 47).
+    ``creep``: after standing :data:`icrsumo.learn.creep.AFTER_S` seconds with nothing to wait
+    for in view, override the network's stop for a moment (True, the default) or never (False:
+    the agents before the creep, issue 47)."""
 
     name = "learned"
     privileged = False
     checkpoint: str = ""
 
     def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu",
-                 runtime: str = "onnx", memory: bool = True) -> None:
+                 runtime: str = "onnx", memory: bool = True, creep: bool = True) -> None:
         path = checkpoint_path(checkpoint or self.checkpoint)
         self.path, self.device, self.runtime = str(path), device, runtime
-        self.memory = bool(memory)
+        self.memory, self.creep = bool(memory), bool(creep)
         self.policy = _policy(self.path, device, runtime)
         self.clock = StopClock()
         self.recall, self.dt = InstructionMemory(), 0.1
+        self.watch = Creep()
 
     def reset(self, info: EpisodeInfo) -> None:
         self.clock = StopClock()
         self.recall, self.dt = InstructionMemory(), float(info.control_dt)
+        self.watch = Creep()
 
     def read(self, obs: Observation) -> str:
         """The text the network reads at this step (call once per step): the instruction memory's
         choice, or the active instruction itself with ``memory`` off."""
         return self.recall.text(obs, self.dt) if self.memory else obs.instruction
 
+    def decide(self, obs: Observation, act: Action) -> Action:
+        """The action taken at this step from the network's (call once per step): the creep's
+        choice (:class:`icrsumo.learn.creep.Creep`), or the network's with ``creep`` off."""
+        return self.watch.action(obs, act) if self.creep else act
+
     def act(self, obs: Observation) -> Action:
         # one observation: act_batch without the grouping (the same policy call, bitwise)
         stopped = self.clock.update(obs.t, obs.speed)
         out = self.policy(obs.bev[None], [self.read(obs)], np.array([obs.speed], dtype=np.float32),
                           np.array([stopped], dtype=np.float32))
-        return _action(out["waypoints"][0], out["speed"][0], bool(_stops(out)[0]))
+        return self.decide(obs, _action(out["waypoints"][0], out["speed"][0], bool(_stops(out)[0])))
 
     #: batched-inference hook (``act_batch(agents, observations)``) used by serve-agent
     act_batch = staticmethod(lambda agents, batch: act_batch(agents, batch))
@@ -132,7 +145,7 @@ class LearnedAgent:
 def act_batch(agents: list[LearnedAgent], batch: list[Observation]) -> list[Action]:
     """Actions of several episodes' agents (``agents[i]`` sees ``batch[i]``) with one forward
     pass per checkpoint, device and runtime: the batched-inference hook of ``icrsumo serve-agent`` and of
-    parallel evaluation. Each agent keeps its own stop clock and instruction memory."""
+    parallel evaluation. Each agent keeps its own stop clock, instruction memory and creep."""
     actions: list[Action | None] = [None] * len(batch)
     groups: dict[tuple[str, str, str], list[int]] = {}
     for i, a in enumerate(agents):
@@ -144,8 +157,8 @@ def act_batch(agents: list[LearnedAgent], batch: list[Observation]) -> list[Acti
         out = policy(np.stack([o.bev for o in obs]),
                      [agents[i].read(o) for i, o in zip(idx, obs)],
                      np.array([o.speed for o in obs], dtype=np.float32), stopped)
-        for i, wps, v, stop in zip(idx, out["waypoints"], out["speed"], _stops(out)):
-            actions[i] = _action(wps, v, bool(stop))
+        for i, o, wps, v, stop in zip(idx, obs, out["waypoints"], out["speed"], _stops(out)):
+            actions[i] = agents[i].decide(o, _action(wps, v, bool(stop)))
     return actions  # type: ignore[return-value]
 
 
