@@ -3,7 +3,7 @@
 
 A network that reads its own speed learns that a car standing still mostly stays still (the
 inertia problem of behaviour cloning): the shipped agents stopped at the all-way stop signs of
-the bundled tiny suite and never drove on (68 of the default ICR run's 528 episodes ran to the
+the bundled tiny suite and never drove on (72 of the default ICR run's 528 episodes ran to the
 route's time-out), and on CARLA's towns they stood for good at empty junctions and green lights
 (7 of `carla-fidelity`'s 104 baselines ended blocked). Their stop output there does not depend on
 the stopped time they read, nor on the text. :class:`Creep` watches, from the agent's own
