@@ -70,10 +70,11 @@ def _ego(bev: np.ndarray) -> tuple[int, int] | None:
     return int(rows[0]), int(round((cols[0] + cols[-1]) / 2.0))
 
 
-def road_user_ahead(bev: np.ndarray) -> bool:
+def road_user_ahead(bev: np.ndarray, ego: tuple[int, int] | None = None) -> bool:
     """Whether a vehicle or pedestrian shows anywhere ahead of the ego's front, within
-    :data:`SIDE_M` to either side (True without an ego in the raster)."""
-    ego = _ego(bev)
+    :data:`SIDE_M` to either side (True without an ego in the raster); ``ego``: :func:`_ego`'s
+    answer when the caller has it."""
+    ego = ego or _ego(bev)
     if ego is None:
         return True
     front, col = ego
@@ -81,10 +82,10 @@ def road_user_ahead(bev: np.ndarray) -> bool:
     return bool(bev[VEHICLES:PEDESTRIANS + 1, :front, max(col - side, 0):col + side + 1].any())
 
 
-def red_line_ahead(bev: np.ndarray) -> bool:
+def red_line_ahead(bev: np.ndarray, ego: tuple[int, int] | None = None) -> bool:
     """Whether a stop line shows in the ego's lane within :data:`LINE_M` ahead of its front
-    (from 1 m behind the front: a line the bumper is on)."""
-    ego = _ego(bev)
+    (from 1 m behind the front: a line the bumper is on); ``ego`` as :func:`road_user_ahead`."""
+    ego = ego or _ego(bev)
     if ego is None:
         return False
     front, col = ego
@@ -106,9 +107,10 @@ class Creep:
 
     def clear(self, obs: Observation) -> bool:
         """Whether the raster shows nothing to wait for (module docstring)."""
-        if road_user_ahead(obs.bev):
+        ego = _ego(obs.bev)
+        if road_user_ahead(obs.bev, ego):
             return False
-        if red_line_ahead(obs.bev):
+        if red_line_ahead(obs.bev, ego):
             sign = bool(SIGN.search(obs.notice) or SIGN.search(obs.instruction))
             return sign and not self.green_seen
         return True
@@ -124,11 +126,16 @@ class Creep:
         target = act.target_speed or 0.0
         if t < self.until:
             if self.clear(obs):
-                return Action(waypoints=act.waypoints, target_speed=max(target, CREEP_SPEED))
+                return _creeping(act, target)
             self.until = -1.0
         if self.still_since is not None and t - self.still_since >= AFTER_S and target < STOP_TARGET \
                 and self.clear(obs):
             self.until, self.still_since = t + CREEP_S, None
             self.creeps += 1
-            return Action(waypoints=act.waypoints, target_speed=max(target, CREEP_SPEED))
+            return _creeping(act, target)
         return act
+
+
+def _creeping(act: Action, target: float) -> Action:
+    """The network's action with its target speed raised to at least :data:`CREEP_SPEED`."""
+    return Action(waypoints=act.waypoints, target_speed=max(target, CREEP_SPEED))
