@@ -22,8 +22,9 @@ with normal traffic, 12 traffic lights; converted exactly as ``icrsumo convert-r
 * **SUMO, ego moved** -- the SUMO-side floor of any closed loop: the same scenario with the ego
   under remote control, moved along the route-oracle's recorded trajectory by
   ``vehicle.moveToXY(keepRoute=2)`` every step, with the subscriptions the runner uses; once
-  with the loop's lane search (``MATCH_RADIUS_M``, SUMO's default 100 m) and once with a 50 m
-  search, what a narrower search would save (it changes episodes, so the loop does not use it).
+  with the loop's lane search (``icrsumo.sim.match``: 8 to 20 m where that provably picks the
+  lane SUMO's own 100 m search picks, 100 m elsewhere) and once with SUMO's 100 m everywhere
+  (``MATCH_RADIUS_M``: the loop before the grid; the same episodes).
 * **runner only** -- the closed loop (``icrsumo.sim.run_episode``) with a non-privileged agent
   whose ``act`` costs nothing: it replays the route-oracle's recorded actions, so the episode is
   the route-oracle's, byte for byte (checked), but no World view is built and no planning runs.
@@ -113,6 +114,7 @@ from icrsumo.instructions.store import read_instruction_sets, route_document  # 
 from icrsumo.sim.backend import EGO_ID, MATCH_RADIUS_M, SumoBackend, SumoSession, add_ego  # noqa: E402
 from icrsumo.sim.callbacks import LoopTimer, LoopTimings  # noqa: E402
 from icrsumo.sim.episode import RunOptions, run_episode  # noqa: E402
+from icrsumo.sim.match import match_grid  # noqa: E402
 from icrsumo.world.convert import ConvertOptions, convert_routes  # noqa: E402
 from icrsumo.world.networks import load_net  # noqa: E402
 from icrsumo.world.scenario import find_scenarios, read_scenario  # noqa: E402
@@ -120,8 +122,6 @@ from icrsumo.world.scenario import find_scenarios, read_scenario  # noqa: E402
 #: CARLA reference point (issue 7): one LangAuto route with LMDrive on an RTX 3090
 CARLA_LMDRIVE_RT = 0.076
 RUNNER_ONLY = "runner-only"
-#: a narrower moveToXY lane search (m), timed for comparison only (it changes episodes)
-NARROW_MATCH_RADIUS_M = 50.0
 #: the learned agents with torch inference (the rows and run "before" ONNX Runtime)
 TORCH_RUNTIME = Path(__file__).resolve().parents[1] / "benchmarks" / "torch_runtime.py"
 TORCH_SUFFIX = "-torch"
@@ -232,10 +232,11 @@ def bare_sumo(sc, n_steps: int) -> tuple[float, float]:
     return t1 - t0, (t2 - t1) / max(n_steps, 1)
 
 
-def sumo_moved_ego(sc, log, length: float, radius: float = MATCH_RADIUS_M) -> float:
+def sumo_moved_ego(sc, log, length: float, full_search: bool = False) -> float:
     """s per step of SUMO with the ego moved along ``log``'s trajectory by moveToXY, inserted and
-    subscribed as the loop does (the backend's own setup), stepped on raw libsumo; ``radius``:
-    moveToXY's lane search (m; default the loop's)."""
+    subscribed as the loop does (the backend's own setup), stepped on raw libsumo; moveToXY's
+    lane search as the loop's (``icrsumo.sim.match``), or SUMO's 100 m with ``full_search``."""
+    grid = match_grid(load_net(sc.net))
     poses = [(x + 0.5 * length * math.cos(h), y + 0.5 * length * math.sin(h), 90.0 - math.degrees(h))
              for x, y, h in zip(log.x, log.y, log.yaw)]
     with SumoBackend(sc) as backend:
@@ -246,7 +247,7 @@ def sumo_moved_ego(sc, log, length: float, radius: float = MATCH_RADIUS_M) -> fl
         move, step = ls.vehicle.moveToXY, ls.simulationStep
         t1 = time.perf_counter()
         for fx, fy, a in poses[1:]:
-            move(EGO_ID, "", -1, fx, fy, a, 2, radius)
+            move(EGO_ID, "", -1, fx, fy, a, 2, MATCH_RADIUS_M if full_search else grid.radius(fx, fy))
             step()
         t2 = time.perf_counter()
     return (t2 - t1) / max(len(poses) - 1, 1)
@@ -282,12 +283,12 @@ def closed_loop(sc, baseline, agents: list[str], repeats: int, log=print) -> dic
     same_trajectory = None
     for rep in range(repeats):
         moved = sumo_moved_ego(sc, ref_log, length)
-        moved_narrow = sumo_moved_ego(sc, ref_log, length, NARROW_MATCH_RADIUS_M)
+        moved_full = sumo_moved_ego(sc, ref_log, length, full_search=True)
         moved_bare = bare_sumo(sc, len(ref_log.t) - 1)[1]
         raw.setdefault("_moved", {}).setdefault("per_step", []).append(moved)
         raw["_moved"].setdefault("ratio", []).append(moved / moved_bare)
-        raw["_moved"].setdefault("narrow_per_step", []).append(moved_narrow)
-        raw["_moved"].setdefault("narrow_ratio", []).append(moved_narrow / moved_bare)
+        raw["_moved"].setdefault("full_per_step", []).append(moved_full)
+        raw["_moved"].setdefault("full_ratio", []).append(moved_full / moved_bare)
         for name in names:
             if name in errors:
                 continue
@@ -341,9 +342,9 @@ def closed_loop(sc, baseline, agents: list[str], repeats: int, log=print) -> dic
     bare_all = [v * ms for n in raw if n != "_moved" for v in raw[n]["bare"]]
     return {"agents": rows, "errors": errors, "sumo_moved_ego_ms_per_step": stats(moved),
             "sumo_moved_ego_ratio_to_bare": stats(raw["_moved"]["ratio"]),
-            "sumo_moved_ego_narrow_search_ms_per_step":
-                stats([v * ms for v in raw["_moved"]["narrow_per_step"]]),
-            "sumo_moved_ego_narrow_search_ratio_to_bare": stats(raw["_moved"]["narrow_ratio"]),
+            "sumo_moved_ego_full_search_ms_per_step":
+                stats([v * ms for v in raw["_moved"]["full_per_step"]]),
+            "sumo_moved_ego_full_search_ratio_to_bare": stats(raw["_moved"]["full_ratio"]),
             "bare_sumo_ms_per_step": stats(bare_all), "runner_only_same_trajectory": same_trajectory,
             "control_dt_s": dt * RunOptions().control_every, "step_length_s": dt}
 
@@ -582,9 +583,9 @@ def table(res: dict) -> str:
         f"| bare SUMO (ego driven by SUMO) | {_fmt(cl['bare_sumo_ms_per_step'])} | 1 | | | |",
         f"| SUMO, ego moved by moveToXY | {_fmt(cl['sumo_moved_ego_ms_per_step'])} | "
         f"{_fmt(cl['sumo_moved_ego_ratio_to_bare'], 2)} | | | |",
-        f"| SUMO, ego moved by moveToXY, a {NARROW_MATCH_RADIUS_M:.0f} m lane search (changes episodes; "
-        f"not used) | {_fmt(cl['sumo_moved_ego_narrow_search_ms_per_step'])} | "
-        f"{_fmt(cl['sumo_moved_ego_narrow_search_ratio_to_bare'], 2)} | | | |",
+        f"| SUMO, ego moved by moveToXY, SUMO's {MATCH_RADIUS_M:.0f} m lane search everywhere (the same "
+        f"lanes; the loop before the grid) | {_fmt(cl['sumo_moved_ego_full_search_ms_per_step'])} | "
+        f"{_fmt(cl['sumo_moved_ego_full_search_ratio_to_bare'], 2)} | | | |",
     ]
     for name, r in cl["agents"].items():
         label = "runner only (replayed actions, non-privileged)" if name == RUNNER_ONLY else name

@@ -117,15 +117,16 @@ def prepare(suite: str, n: int | None, k: int, workers: int, work: Path) -> dict
 
 
 # --------------------------------------------------------------------------- runs
-def profiled_run(prep: dict, agent: str, k: int, workers: int, out: Path) -> RunProfile:
+def profiled_run(prep: dict, agent: str, k: int, workers: int, out: Path) -> tuple[RunProfile, str | None]:
     """``icrsumo evaluate`` of ``agent`` on the prepared suite (four families, K = ``k``) into a
-    fresh ``out`` holding the prepared instructions, with the profile on."""
+    fresh ``out`` holding the prepared instructions, with the profile on: the profile and the
+    run's digest (the same episodes give the same digest)."""
     shutil.copytree(prep["instructions"], out / "instructions")
     res = run_evaluation(EvalOptions(out=out, suite=str(prep["scenarios"]), agents=(agent,), k=k,
                                      seed=SEED, workers=workers, quiet=True, profile=True))
     if res.crashed:
         print(f"benchmark: {res.crashed} episodes of {agent} crashed ({out})", flush=True)
-    return res.profile
+    return res.profile, res.digest
 
 
 def bare_task(task: tuple[str, int]) -> JobTiming:
@@ -201,15 +202,16 @@ def protocol(suites: tuple[str, ...], agent: str, n: int | None, k: int, workers
                  "workers": workers, "families": list(FAMILIES), "cpu": cpu_name(), "cores": os.cpu_count(),
                  "python": platform.python_version(), "load_average_start": os.getloadavg(),
                  "full_protocol": n is None and k == 8 and workers == 2, "tolerance": TOLERANCE,
-                 "preparation": {}, "suite_walls": {}}
+                 "preparation": {}, "suite_walls": {}, "digests": {}}
     runs: dict[str, list[RunProfile]] = {"agent": [], "oracle": []}
     for suite in suites:
         prep = prepare(suite, n, k, workers, work / suite / "prep")
         res["preparation"][suite] = {"convert_s": prep["convert_s"], "generate_s": prep["generate_s"]}
         log(f"{suite}: prepared in {prep['convert_s'] + prep['generate_s']:.1f} s")
         walls = res["suite_walls"][suite] = {}
+        digests = res["digests"][suite] = {}
         for key, spec in (("agent", agent), ("oracle", ORACLE)):
-            p = profiled_run(prep, spec, k, workers, work / suite / key)
+            p, digests[key] = profiled_run(prep, spec, k, workers, work / suite / key)
             runs[key].append(p)
             walls[key] = p.wall_s
             log(f"  {spec}: {len(p.episodes)} episodes, {p.wall_s:.1f} s")
@@ -252,7 +254,9 @@ def table(res: dict) -> str:
     add(f"phases cover workers x wall (other within {100 * TOLERANCE:.0f} %)",
         ["yes" if abs(r["other_share"]) <= TOLERANCE else f"no ({100 * r['other_share']:.1f} %)"
          for r in runs])
-    lines += ["", *ratio_lines(res), "", *histogram(res)]
+    lines += ["", *ratio_lines(res), "", *histogram(res), ""]
+    lines += [f"digest {suite} {key}: {d}" for suite, ds in res.get("digests", {}).items()
+              for key, d in ds.items()]
     return "\n".join(lines)
 
 

@@ -20,17 +20,19 @@ from icrsumo.core.resources import sumo_home
 from icrsumo.world.scenario import Scenario
 
 from .frame import NO_LIGHTS, Contact, SimFrame
+from .match import FULL_RADIUS
 
 EGO_ID = "ego"
 #: radius (m) of the context subscription around the ego (nearby vehicles and persons)
 CONTEXT_RADIUS = 60.0
 #: how far (m) SUMO looks for lanes when the ego is moved (``moveToXY``'s ``matchThreshold``):
-#: SUMO's default. A narrower search is cheaper (28 against 74 us a call on LangAuto-long) but
-#: not the same: SUMO normalises the distance term of its lane ranking by the largest distance in
-#: range (capped at a lane width), so where no other lane lies within the narrower radius the
-#: choice between the near lanes changes. 50 m changed 3 of 18 perturbed training drives on
-#: icrsumo's long training routes (docs/performance.md), so the loop keeps SUMO's 100 m.
-MATCH_RADIUS_M = 100.0
+#: SUMO's default, which defines the episodes. A uniformly narrower search is cheaper but not the
+#: same: SUMO normalises the distance term of its lane ranking by the largest distance in range
+#: (capped at a lane width), so where no other lane lies within the narrower radius the choice
+#: between the near lanes changes (50 m changed 3 of 18 perturbed training drives,
+#: docs/performance.md). ``SumoBackend(search=...)`` narrows it only where that provably picks
+#: the same lane (:mod:`icrsumo.sim.match`).
+MATCH_RADIUS_M = FULL_RADIUS
 
 _active = False  # libsumo's own state is per process: at most one session is open
 
@@ -217,13 +219,17 @@ class SumoBackend:
     ``start()`` starts SUMO, ``run_until(t)`` runs the traffic warm-up up to the ego's departure;
     ``insert_ego(x, y, yaw)`` adds the externally driven ego at the scenario's start (pose of
     its front bumper, m and rad) and takes one step; ``place_ego(x, y, yaw)`` moves it there
-    for the next ``step()``; ``read(surroundings)`` returns the :class:`SimFrame` of the
-    current step (the nearby actors only when ``surroundings``). ``close()`` is idempotent.
+    for the next ``step()``, SUMO searching lanes within ``search(x, y)`` m (None: always
+    ``MATCH_RADIUS_M``; :meth:`icrsumo.sim.match.MatchGrid.radius` gives the same lanes
+    faster); ``read(surroundings)`` returns the :class:`SimFrame` of the current step (the
+    nearby actors only when ``surroundings``). ``close()`` is idempotent.
     """
 
-    def __init__(self, scenario: Scenario, context_radius: float = CONTEXT_RADIUS) -> None:
+    def __init__(self, scenario: Scenario, context_radius: float = CONTEXT_RADIUS,
+                 search: Callable[[float, float], float] | None = None) -> None:
         self.scenario = scenario
         self.context_radius = context_radius
+        self.search = search
         self._session: SumoSession | None = None
         self.tls_ids: tuple[str, ...] = ()
         self._removed: tuple[str, ...] = ()   # background vehicles removed in the last step
@@ -290,9 +296,10 @@ class SumoBackend:
     def place_ego(self, x: float, y: float, yaw: float) -> None:
         """Move the ego's front bumper to (x, y) m heading ``yaw`` rad (SUMO keeps it on the
         nearest lane, or off every lane when none is near: ``keepRoute=2``)."""
+        radius = MATCH_RADIUS_M if self.search is None else self.search(x, y)
         with _translated():
             self._session.ls.vehicle.moveToXY(EGO_ID, "", -1, x, y, 90.0 - math.degrees(yaw), 2,
-                                              MATCH_RADIUS_M)
+                                              radius)
 
     def step(self) -> None:
         """One SUMO step; background vehicles that collided with each other in it are removed

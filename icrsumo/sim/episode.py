@@ -49,6 +49,7 @@ from .control import WaypointController, WaypointPath
 from .drivable import drivable_area
 from .frame import SimFrame
 from .lanes import driving_lanes
+from .match import match_grid
 from .sensors import Sensors, SensorState
 
 #: SUMO steps per agent decision (0.05 s x 2 = 10 Hz)
@@ -114,6 +115,8 @@ class Episode:
         self.clock = clock
         self.options, self.privileged, self.needs_route = options, privileged, needs_route
         self.net = net = load_net(scenario.net)
+        #: the ego's lane search, narrowed where that picks SUMO's lane (icrsumo.sim.match)
+        self._search = match_grid(net).radius
         self.params = params = VehicleParams(length=scenario.ego.length, width=scenario.ego.width)
         #: the route polyline as the log stores it (m, rounded to 0.01; with the lane heading at
         #: each vertex, rad rounded to 1e-4, where the scenario has them) and its dense route
@@ -225,7 +228,7 @@ class Episode:
             cb.on_start(self)
         if self.guarded is not None:
             self.guarded.reset()
-        self.backend = backend = SumoBackend(self.scenario)
+        self.backend = backend = SumoBackend(self.scenario, search=self._search)
         backend.start()
         scenario, params = self.scenario, self.params
         try:

@@ -353,16 +353,25 @@ def test_a_crash_in_the_loop_keeps_the_log_up_to_the_last_step(quiet):
     assert log.message.startswith("ValueError: guard broke at test_episode.py:")
 
 
+class _Uniform:
+    """A lane search of one radius everywhere (stands in for :class:`MatchGrid`)."""
+
+    def __init__(self, radius: float) -> None:
+        self.radius = lambda x, y: radius
+
+
 @pytest.mark.sumo
-def test_the_ego_lane_search_is_sumos_own(monkeypatch, tmp_path):
-    """The ego is moved with SUMO's own lane search (100 m). A narrower one is cheaper (issue 48)
-    but changes episodes: SUMO scales its lane ranking by the farthest lane in range, so on a
-    road with no other lane within 50 m a perturbed training drive (train_long_011, pass 1)
-    ends differently with 50 m."""
+def test_the_ego_lane_search_picks_sumos_own_lane(monkeypatch, tmp_path):
+    """The ego is moved with SUMO's own lane search (100 m) wherever a narrower one could pick
+    another lane (issue 48). A uniformly narrower search changes episodes: SUMO scales its lane
+    ranking by the farthest lane in range, so on a road with no other lane within 50 m a
+    perturbed training drive (train_long_011, pass 1) ends differently with 50 m. The loop's
+    grid (icrsumo.sim.match), 8 to 20 m where it provably picks the same lane, gives the drive
+    SUMO's 100 m gives."""
     import xml.etree.ElementTree as ET
 
     from icrsumo.learn.collect import CollectOptions, collect_episode
-    from icrsumo.sim import backend
+    from icrsumo.sim import backend, episode
 
     assert backend.MATCH_RADIUS_M == 100.0
     tree = ET.parse(bundled_suites()["train"])
@@ -372,7 +381,10 @@ def test_the_ego_lane_search_is_sumos_own(monkeypatch, tmp_path):
     tree.write(tmp_path / "one.xml", encoding="utf-8", xml_declaration=True)
     convert_routes(tmp_path / "one.xml", tmp_path / "conv", ConvertOptions(workers=1))
     d = str(find_scenarios(tmp_path / "conv")[0])
+    grid, _ = collect_episode(d, 1, CollectOptions(suite="train"))
+    monkeypatch.setattr(episode, "match_grid", lambda net: _Uniform(100.0))
     sumo_default, _ = collect_episode(d, 1, CollectOptions(suite="train"))
-    monkeypatch.setattr(backend, "MATCH_RADIUS_M", 50.0)
+    monkeypatch.setattr(episode, "match_grid", lambda net: _Uniform(50.0))
     narrower, _ = collect_episode(d, 1, CollectOptions(suite="train"))
     assert narrower != sumo_default
+    assert grid == sumo_default

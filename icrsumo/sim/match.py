@@ -1,0 +1,167 @@
+"""How far SUMO must look for lanes when the ego is moved, cell by cell: the narrowest lane search
+that provably picks the lane SUMO's full search picks. Pure (numpy); no SUMO.
+
+The loop moves the ego every step with ``moveToXY(keepRoute=2)`` and SUMO's default search radius
+(``FULL_RADIUS``, 100 m). SUMO (``Helper::moveToXYMap`` in ``src/libsumo/Helper.cpp``, SUMO 1.28)
+takes every lane of every edge that has a lane within the radius as a candidate and ranks it by
+
+    value = 0.5 * distN + 0.35 * angleN + 1 * idN + 0.1 * onRouteN + 0.1 * sameEdgeN
+
+with ``distN = 1 - dist / maxDist`` (``-10`` where the mapping is ambiguous: the position lies
+past an end of the lane), ``maxDist`` the largest ``min(dist, 3.2)`` over the candidates, every
+other term in [0, 1] and ``idN`` 0 here (it matches a lane whose id is ``"_-1"``; the grid is
+not used on a network that has one). The first best lane in SUMO's lane order wins. What the
+search radius changes is only the candidate set. A narrower radius ``r`` gives the same lane
+wherever, for the point moved to,
+
+* (A) a candidate lane lies at a distance in [3.2, r]: ``maxDist`` is 3.2 with either radius;
+* (B) a candidate lane lies nearer than ``r - 3.52`` (and 31.68) m with its nearest point
+  inside it (not an end): its value exceeds every value a lane beyond ``r`` can reach
+  (``1.05 - r / 6.4`` unambiguous, ``-4.45`` ambiguous), so the best lane is within ``r`` and,
+  being unambiguous, keeps SUMO's tie order.
+
+:func:`match_grid` checks both on a grid of ``CELL`` m cells for every point of a cell at once
+(distances change by at most the cell's half-diagonal across it, with a 1 cm margin), for each of
+``RADII`` in turn, and :meth:`MatchGrid.radius` gives the narrowest radius that holds at a point
+(``FULL_RADIUS`` where none does: off the roads, at a lane's end with nothing beside it). Every
+lane the proof names is a candidate SUMO sees: a lane a passenger car may use with a shape of
+non-zero length (``RoadNet.lane_shape``: normal and junction-internal lanes).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from icrsumo.world.networks import RoadNet
+
+#: SUMO's own search radius (m): the episodes are defined by it
+FULL_RADIUS = 100.0
+#: narrower radii (m) tried, narrowest first
+RADII = (8.0, 12.0, 20.0)
+#: SUMO_const_laneWidth (m): the cap of the distance normaliser
+LANE_WIDTH = 3.2
+#: side (m) of a grid cell
+CELL = 1.0
+#: margin (m) on every inequality: SUMO's distances are doubles computed another way
+EPS = 0.01
+#: the unused lane id that would score ``idN`` = 1 (``moveToXY`` with edge "" and lane -1)
+_ORIG_ID = "_-1"
+
+
+@dataclass(frozen=True)
+class MatchGrid:
+    """Per cell of a grid (origin ``x0``, ``y0`` m; ``cell`` m), the index into ``radii`` of the
+    narrowest search radius that picks SUMO's lane (``len(radii)``: none, search ``FULL_RADIUS``)."""
+
+    x0: float
+    y0: float
+    cell: float
+    codes: np.ndarray        # (ny, nx) uint8
+    radii: tuple[float, ...]
+
+    def radius(self, x: float, y: float) -> float:
+        """The search radius (m) for moving the ego's front bumper to (x, y) m."""
+        i = int((y - self.y0) // self.cell)
+        j = int((x - self.x0) // self.cell)
+        codes = self.codes
+        if 0 <= i < codes.shape[0] and 0 <= j < codes.shape[1]:
+            k = codes[i, j]
+            if k < len(self.radii):
+                return self.radii[k]
+        return FULL_RADIUS
+
+    def share(self) -> dict[float, float]:
+        """Share of the grid's cells per radius (FULL_RADIUS included), for reports."""
+        n = self.codes.size
+        out = {r: float(np.count_nonzero(self.codes == k)) / n for k, r in enumerate(self.radii)}
+        out[FULL_RADIUS] = float(np.count_nonzero(self.codes >= len(self.radii))) / n
+        return out
+
+
+def _seg_dist(px: np.ndarray, py: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance (m) from points (px, py) to the segment a-b."""
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    l2 = dx * dx + dy * dy
+    if l2 <= 0.0:
+        return np.hypot(px - a[0], py - a[1])
+    t = np.clip(((px - a[0]) * dx + (py - a[1]) * dy) / l2, 0.0, 1.0)
+    return np.hypot(px - (a[0] + t * dx), py - (a[1] + t * dy))
+
+
+def _rect_dist(px: float, py: float, cx: np.ndarray, cy: np.ndarray, half: float) -> np.ndarray:
+    """Distance (m) from the point (px, py) to the squares of centres (cx, cy), side 2 * half."""
+    return np.hypot(np.maximum(np.abs(px - cx) - half, 0.0), np.maximum(np.abs(py - cy) - half, 0.0))
+
+
+def build_match_grid(lanes: dict[str, np.ndarray], orig_ids: frozenset[str] = frozenset(),
+                     radii: tuple[float, ...] = RADII, cell: float = CELL) -> MatchGrid:
+    """The grid for candidate lanes ``lanes`` (id -> (N, 2) shape, m); ``orig_ids``: the
+    lanes' ``origId`` parameters (a lane id or parameter equal to ``"_-1"`` disables the grid).
+
+    Per lane and cell: the distance's least value over the cell, exact where the lane does not
+    cross it (the nearest of the cell's corners to the lane and of the lane's vertices to the
+    cell), and a bound on its largest (the farthest corner + half the diagonal)."""
+    shapes = [np.asarray(s, dtype=float)[:, :2] for s in lanes.values() if len(s) >= 2]
+    shapes = [s for s in shapes if float(np.hypot(*np.diff(s, axis=0).T).sum()) > 0.0]
+    if not shapes or _ORIG_ID in lanes or _ORIG_ID in orig_ids:
+        return MatchGrid(0.0, 0.0, cell, np.full((0, 0), len(radii), np.uint8), tuple(radii))
+    margin = max(radii) + cell
+    lo = np.min([s.min(axis=0) for s in shapes], axis=0) - margin
+    hi = np.max([s.max(axis=0) for s in shapes], axis=0) + margin
+    x0, y0 = float(np.floor(lo[0])), float(np.floor(lo[1]))
+    nx = int((hi[0] - x0) // cell) + 1    # every window below ends within the grid
+    ny = int((hi[1] - y0) // cell) + 1
+    half, spread = 0.5 * cell, cell * np.sqrt(0.5)
+    near = np.zeros((len(radii), ny, nx), bool)     # (A): a lane in [3.2, r] m
+    inside = np.zeros((len(radii), ny, nx), bool)   # (B): an unambiguous lane nearer than r - 3.52
+    reach = LANE_WIDTH + cell + 1.0                 # a vertex matters to the least distance only so near
+    for s in shapes:
+        slo, shi = s.min(axis=0) - margin, s.max(axis=0) + margin
+        j0, j1 = int((slo[0] - x0) // cell), int((shi[0] - x0) // cell) + 1
+        i0, i1 = int((slo[1] - y0) // cell), int((shi[1] - y0) // cell) + 1
+        dv = np.full((i1 - i0 + 1, j1 - j0 + 1), np.inf)      # at the cells' corners
+        for a, b in zip(s[:-1], s[1:], strict=True):
+            wlo, whi = np.minimum(a, b) - margin, np.maximum(a, b) + margin
+            wj0, wj1 = int((wlo[0] - x0) // cell), int((whi[0] - x0) // cell) + 2
+            wi0, wi1 = int((wlo[1] - y0) // cell), int((whi[1] - y0) // cell) + 2
+            px = x0 + np.arange(wj0, wj1) * cell
+            py = y0 + np.arange(wi0, wi1) * cell
+            sub = dv[wi0 - i0:wi1 - i0, wj0 - j0:wj1 - j0]
+            np.minimum(sub, _seg_dist(px[None, :], py[:, None], a, b), out=sub)
+        corners = (dv[:-1, :-1], dv[:-1, 1:], dv[1:, :-1], dv[1:, 1:])
+        dmin = np.minimum(np.minimum(corners[0], corners[1]), np.minimum(corners[2], corners[3]))
+        dmax = np.maximum(np.maximum(corners[0], corners[1]), np.maximum(corners[2], corners[3])) + spread
+        for vx, vy in s:
+            wj0, wj1 = max(int((vx - reach - x0) // cell), j0), min(int((vx + reach - x0) // cell) + 1, j1)
+            wi0, wi1 = max(int((vy - reach - y0) // cell), i0), min(int((vy + reach - y0) // cell) + 1, i1)
+            cx = x0 + (np.arange(wj0, wj1) + 0.5) * cell
+            cy = y0 + (np.arange(wi0, wi1) + 0.5) * cell
+            sub = dmin[wi0 - i0:wi1 - i0, wj0 - j0:wj1 - j0]
+            np.minimum(sub, _rect_dist(vx, vy, cx[None, :], cy[:, None], half), out=sub)
+        cx = x0 + (np.arange(j0, j1) + 0.5) * cell
+        cy = y0 + (np.arange(i0, i1) + 0.5) * cell
+        ends = np.minimum(_rect_dist(s[0, 0], s[0, 1], cx[None, :], cy[:, None], half),
+                          _rect_dist(s[-1, 0], s[-1, 1], cx[None, :], cy[:, None], half))
+        interior = ends > dmax + EPS
+        for k, r in enumerate(radii):
+            near[k, i0:i1, j0:j1] |= (dmin >= LANE_WIDTH + EPS) & (dmax <= r - EPS)
+            inside[k, i0:i1, j0:j1] |= interior & (dmax < min(r - 3.52, 31.68) - EPS)
+    codes = np.full((ny, nx), len(radii), np.uint8)
+    for k in range(len(radii) - 1, -1, -1):
+        codes[near[k] & inside[k]] = k
+    return MatchGrid(x0, y0, cell, codes, tuple(radii))
+
+
+_GRIDS: dict[str, MatchGrid] = {}
+
+
+def match_grid(net: RoadNet) -> MatchGrid:
+    """The :class:`MatchGrid` of ``net`` (built once per process and network content)."""
+    grid = _GRIDS.get(net.sha256)
+    if grid is None:
+        sl = net.sumolib_net
+        orig = frozenset(str(sl.getLane(lid).getParam("origId", lid)) for lid in net.lane_shape)
+        grid = _GRIDS[net.sha256] = build_match_grid(net.lane_shape, orig)
+    return grid
