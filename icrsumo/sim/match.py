@@ -30,8 +30,6 @@ non-zero length (``RoadNet.lane_shape``: normal and junction-internal lanes).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from icrsumo.world.networks import RoadNet
@@ -50,33 +48,75 @@ EPS = 0.01
 _ORIG_ID = "_-1"
 
 
-@dataclass(frozen=True)
-class MatchGrid:
-    """Per cell of a grid (origin ``x0``, ``y0`` m; ``cell`` m), the index into ``radii`` of the
-    narrowest search radius that picks SUMO's lane (``len(radii)``: none, search ``FULL_RADIUS``)."""
+#: side (cells) of the square tiles the grid is computed in, each when first needed
+TILE = 32
 
-    x0: float
-    y0: float
-    cell: float
-    codes: np.ndarray        # (ny, nx) uint8
-    radii: tuple[float, ...]
+
+class MatchGrid:
+    """Per cell of a grid over the network (origin ``x0``, ``y0`` m; ``cell`` m), the narrowest
+    of ``radii`` whose lane search picks SUMO's lane (:meth:`radius`). The cells are computed
+    tile by tile (``TILE`` cells a side) when the ego first comes near: a drive visits a small
+    part of a town. ``lanes``: the candidate lanes' shapes ((N, 2) m each); ``enabled`` False
+    (a lane named or parameterised ``"_-1"``): always ``FULL_RADIUS``."""
+
+    def __init__(self, lanes: list[np.ndarray], radii: tuple[float, ...] = RADII, cell: float = CELL,
+                 enabled: bool = True) -> None:
+        shapes = [np.asarray(s, dtype=float)[:, :2] for s in lanes if len(s) >= 2]
+        self.shapes = [s for s in shapes if float(np.hypot(*np.diff(s, axis=0).T).sum()) > 0.0]
+        self.radii, self.cell = tuple(radii), float(cell)
+        self.enabled = enabled and bool(self.shapes)
+        self.margin = max(self.radii) + self.cell
+        if self.shapes:
+            self._lo = np.array([s.min(axis=0) for s in self.shapes]) - self.margin
+            self._hi = np.array([s.max(axis=0) for s in self.shapes]) + self.margin
+            lo = self._lo.min(axis=0)
+            self.x0, self.y0 = float(np.floor(lo[0])), float(np.floor(lo[1]))
+        else:
+            self.x0 = self.y0 = 0.0
+        self._tiles: dict[tuple[int, int], np.ndarray] = {}
 
     def radius(self, x: float, y: float) -> float:
         """The search radius (m) for moving the ego's front bumper to (x, y) m."""
+        if not self.enabled:
+            return FULL_RADIUS
         i = int((y - self.y0) // self.cell)
         j = int((x - self.x0) // self.cell)
-        codes = self.codes
-        if 0 <= i < codes.shape[0] and 0 <= j < codes.shape[1]:
-            k = codes[i, j]
-            if k < len(self.radii):
-                return self.radii[k]
-        return FULL_RADIUS
+        key = (i // TILE, j // TILE)
+        codes = self._tiles.get(key)
+        if codes is None:
+            codes = self._tiles[key] = self.codes(key[0] * TILE, key[1] * TILE, TILE, TILE)
+        k = codes[i % TILE, j % TILE]
+        return self.radii[k] if k < len(self.radii) else FULL_RADIUS
+
+    def codes(self, i0: int, j0: int, ny: int, nx: int) -> np.ndarray:
+        """(ny, nx) uint8: for the cells from row ``i0``, column ``j0``, the index into
+        ``radii`` of the narrowest radius that holds (``len(radii)``: none)."""
+        cell, x0, y0, k_full = self.cell, self.x0, self.y0, len(self.radii)
+        out = np.full((ny, nx), k_full, np.uint8)
+        if not self.enabled:
+            return out
+        bx = (x0 + j0 * cell, x0 + (j0 + nx) * cell)
+        by = (y0 + i0 * cell, y0 + (i0 + ny) * cell)
+        hit = ((self._lo[:, 0] <= bx[1]) & (self._hi[:, 0] >= bx[0])
+               & (self._lo[:, 1] <= by[1]) & (self._hi[:, 1] >= by[0]))
+        near = np.zeros((k_full, ny, nx), bool)     # (A): a lane in [3.2, r] m
+        inside = np.zeros((k_full, ny, nx), bool)   # (B): an unambiguous lane nearer than r - 3.52
+        for n in np.flatnonzero(hit):
+            _lane(self.shapes[n], self, i0, j0, ny, nx, near, inside)
+        for k in range(k_full - 1, -1, -1):
+            out[near[k] & inside[k]] = k
+        return out
 
     def share(self) -> dict[float, float]:
-        """Share of the grid's cells per radius (FULL_RADIUS included), for reports."""
-        n = self.codes.size
-        out = {r: float(np.count_nonzero(self.codes == k)) / n for k, r in enumerate(self.radii)}
-        out[FULL_RADIUS] = float(np.count_nonzero(self.codes >= len(self.radii))) / n
+        """Share of the network's cells per radius (FULL_RADIUS included), all tiles computed
+        (for tests and reports)."""
+        if not self.shapes:
+            return {FULL_RADIUS: 1.0}
+        hi = self._hi.max(axis=0)
+        ny, nx = int((hi[1] - self.y0) // self.cell) + 1, int((hi[0] - self.x0) // self.cell) + 1
+        codes = self.codes(0, 0, ny, nx)
+        out = {r: float(np.count_nonzero(codes == k)) / codes.size for k, r in enumerate(self.radii)}
+        out[FULL_RADIUS] = float(np.count_nonzero(codes >= len(self.radii))) / codes.size
         return out
 
 
@@ -95,70 +135,76 @@ def _rect_dist(px: float, py: float, cx: np.ndarray, cy: np.ndarray, half: float
     return np.hypot(np.maximum(np.abs(px - cx) - half, 0.0), np.maximum(np.abs(py - cy) - half, 0.0))
 
 
+def _span(lo: float, hi: float, origin: float, cell: float, first: int, end: int, extra: int = 1
+          ) -> tuple[int, int]:
+    """Grid indices [a, b) of the cells from ``lo`` to ``hi`` m (``extra`` more at the end),
+    within [first, end)."""
+    return max(int((lo - origin) // cell), first), min(int((hi - origin) // cell) + extra, end)
+
+
+def _lane(s: np.ndarray, g: MatchGrid, gi0: int, gj0: int, ny: int, nx: int,
+          near: np.ndarray, inside: np.ndarray) -> None:
+    """Mark in ``near`` and ``inside`` ((len(radii), ny, nx), the cells from row ``gi0``,
+    column ``gj0``) where lane ``s`` satisfies (A) and (B).
+
+    Per cell: the lane's least distance over the cell, exact where the lane does not cross it
+    (the nearest of the cell's corners to the lane and of the lane's vertices to the cell), and
+    a bound on its largest (the farthest corner + half the diagonal)."""
+    cell, x0, y0, margin = g.cell, g.x0, g.y0, g.margin
+    half, spread = 0.5 * cell, cell * np.sqrt(0.5)
+    slo, shi = s.min(axis=0) - margin, s.max(axis=0) + margin
+    j0, j1 = _span(slo[0], shi[0], x0, cell, gj0, gj0 + nx)
+    i0, i1 = _span(slo[1], shi[1], y0, cell, gi0, gi0 + ny)
+    if j0 >= j1 or i0 >= i1:
+        return
+    dv = np.full((i1 - i0 + 1, j1 - j0 + 1), np.inf)      # at the cells' corners
+    for a, b in zip(s[:-1], s[1:], strict=True):
+        wlo, whi = np.minimum(a, b) - margin, np.maximum(a, b) + margin
+        wj0, wj1 = _span(wlo[0], whi[0], x0, cell, j0, j1 + 1, 2)
+        wi0, wi1 = _span(wlo[1], whi[1], y0, cell, i0, i1 + 1, 2)
+        if wj0 >= wj1 or wi0 >= wi1:
+            continue
+        px = x0 + np.arange(wj0, wj1) * cell
+        py = y0 + np.arange(wi0, wi1) * cell
+        sub = dv[wi0 - i0:wi1 - i0, wj0 - j0:wj1 - j0]
+        np.minimum(sub, _seg_dist(px[None, :], py[:, None], a, b), out=sub)
+    corners = (dv[:-1, :-1], dv[:-1, 1:], dv[1:, :-1], dv[1:, 1:])
+    dmin = np.minimum(np.minimum(corners[0], corners[1]), np.minimum(corners[2], corners[3]))
+    dmax = np.maximum(np.maximum(corners[0], corners[1]), np.maximum(corners[2], corners[3])) + spread
+    reach = LANE_WIDTH + cell + 1.0                 # a vertex matters to the least distance only so near
+    for vx, vy in s:
+        wj0, wj1 = _span(vx - reach, vx + reach, x0, cell, j0, j1)
+        wi0, wi1 = _span(vy - reach, vy + reach, y0, cell, i0, i1)
+        if wj0 >= wj1 or wi0 >= wi1:
+            continue
+        cx = x0 + (np.arange(wj0, wj1) + 0.5) * cell
+        cy = y0 + (np.arange(wi0, wi1) + 0.5) * cell
+        sub = dmin[wi0 - i0:wi1 - i0, wj0 - j0:wj1 - j0]
+        np.minimum(sub, _rect_dist(vx, vy, cx[None, :], cy[:, None], half), out=sub)
+    cx = x0 + (np.arange(j0, j1) + 0.5) * cell
+    cy = y0 + (np.arange(i0, i1) + 0.5) * cell
+    ends = np.minimum(_rect_dist(s[0, 0], s[0, 1], cx[None, :], cy[:, None], half),
+                      _rect_dist(s[-1, 0], s[-1, 1], cx[None, :], cy[:, None], half))
+    interior = ends > dmax + EPS
+    ri, rj = slice(i0 - gi0, i1 - gi0), slice(j0 - gj0, j1 - gj0)
+    for k, r in enumerate(g.radii):
+        near[k, ri, rj] |= (dmin >= LANE_WIDTH + EPS) & (dmax <= r - EPS)
+        inside[k, ri, rj] |= interior & (dmax < min(r - 3.52, 31.68) - EPS)
+
+
 def build_match_grid(lanes: dict[str, np.ndarray], orig_ids: frozenset[str] = frozenset(),
                      radii: tuple[float, ...] = RADII, cell: float = CELL) -> MatchGrid:
     """The grid for candidate lanes ``lanes`` (id -> (N, 2) shape, m); ``orig_ids``: the
-    lanes' ``origId`` parameters (a lane id or parameter equal to ``"_-1"`` disables the grid).
-
-    Per lane and cell: the distance's least value over the cell, exact where the lane does not
-    cross it (the nearest of the cell's corners to the lane and of the lane's vertices to the
-    cell), and a bound on its largest (the farthest corner + half the diagonal)."""
-    shapes = [np.asarray(s, dtype=float)[:, :2] for s in lanes.values() if len(s) >= 2]
-    shapes = [s for s in shapes if float(np.hypot(*np.diff(s, axis=0).T).sum()) > 0.0]
-    if not shapes or _ORIG_ID in lanes or _ORIG_ID in orig_ids:
-        return MatchGrid(0.0, 0.0, cell, np.full((0, 0), len(radii), np.uint8), tuple(radii))
-    margin = max(radii) + cell
-    lo = np.min([s.min(axis=0) for s in shapes], axis=0) - margin
-    hi = np.max([s.max(axis=0) for s in shapes], axis=0) + margin
-    x0, y0 = float(np.floor(lo[0])), float(np.floor(lo[1]))
-    nx = int((hi[0] - x0) // cell) + 1    # every window below ends within the grid
-    ny = int((hi[1] - y0) // cell) + 1
-    half, spread = 0.5 * cell, cell * np.sqrt(0.5)
-    near = np.zeros((len(radii), ny, nx), bool)     # (A): a lane in [3.2, r] m
-    inside = np.zeros((len(radii), ny, nx), bool)   # (B): an unambiguous lane nearer than r - 3.52
-    reach = LANE_WIDTH + cell + 1.0                 # a vertex matters to the least distance only so near
-    for s in shapes:
-        slo, shi = s.min(axis=0) - margin, s.max(axis=0) + margin
-        j0, j1 = int((slo[0] - x0) // cell), int((shi[0] - x0) // cell) + 1
-        i0, i1 = int((slo[1] - y0) // cell), int((shi[1] - y0) // cell) + 1
-        dv = np.full((i1 - i0 + 1, j1 - j0 + 1), np.inf)      # at the cells' corners
-        for a, b in zip(s[:-1], s[1:], strict=True):
-            wlo, whi = np.minimum(a, b) - margin, np.maximum(a, b) + margin
-            wj0, wj1 = int((wlo[0] - x0) // cell), int((whi[0] - x0) // cell) + 2
-            wi0, wi1 = int((wlo[1] - y0) // cell), int((whi[1] - y0) // cell) + 2
-            px = x0 + np.arange(wj0, wj1) * cell
-            py = y0 + np.arange(wi0, wi1) * cell
-            sub = dv[wi0 - i0:wi1 - i0, wj0 - j0:wj1 - j0]
-            np.minimum(sub, _seg_dist(px[None, :], py[:, None], a, b), out=sub)
-        corners = (dv[:-1, :-1], dv[:-1, 1:], dv[1:, :-1], dv[1:, 1:])
-        dmin = np.minimum(np.minimum(corners[0], corners[1]), np.minimum(corners[2], corners[3]))
-        dmax = np.maximum(np.maximum(corners[0], corners[1]), np.maximum(corners[2], corners[3])) + spread
-        for vx, vy in s:
-            wj0, wj1 = max(int((vx - reach - x0) // cell), j0), min(int((vx + reach - x0) // cell) + 1, j1)
-            wi0, wi1 = max(int((vy - reach - y0) // cell), i0), min(int((vy + reach - y0) // cell) + 1, i1)
-            cx = x0 + (np.arange(wj0, wj1) + 0.5) * cell
-            cy = y0 + (np.arange(wi0, wi1) + 0.5) * cell
-            sub = dmin[wi0 - i0:wi1 - i0, wj0 - j0:wj1 - j0]
-            np.minimum(sub, _rect_dist(vx, vy, cx[None, :], cy[:, None], half), out=sub)
-        cx = x0 + (np.arange(j0, j1) + 0.5) * cell
-        cy = y0 + (np.arange(i0, i1) + 0.5) * cell
-        ends = np.minimum(_rect_dist(s[0, 0], s[0, 1], cx[None, :], cy[:, None], half),
-                          _rect_dist(s[-1, 0], s[-1, 1], cx[None, :], cy[:, None], half))
-        interior = ends > dmax + EPS
-        for k, r in enumerate(radii):
-            near[k, i0:i1, j0:j1] |= (dmin >= LANE_WIDTH + EPS) & (dmax <= r - EPS)
-            inside[k, i0:i1, j0:j1] |= interior & (dmax < min(r - 3.52, 31.68) - EPS)
-    codes = np.full((ny, nx), len(radii), np.uint8)
-    for k in range(len(radii) - 1, -1, -1):
-        codes[near[k] & inside[k]] = k
-    return MatchGrid(x0, y0, cell, codes, tuple(radii))
+    lanes' ``origId`` parameters (a lane id or parameter equal to ``"_-1"`` disables it)."""
+    return MatchGrid(list(lanes.values()), radii, cell,
+                     enabled=_ORIG_ID not in lanes and _ORIG_ID not in orig_ids)
 
 
 _GRIDS: dict[str, MatchGrid] = {}
 
 
 def match_grid(net: RoadNet) -> MatchGrid:
-    """The :class:`MatchGrid` of ``net`` (built once per process and network content)."""
+    """The :class:`MatchGrid` of ``net`` (one per process and network content)."""
     grid = _GRIDS.get(net.sha256)
     if grid is None:
         sl = net.sumolib_net

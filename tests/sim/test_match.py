@@ -44,6 +44,22 @@ def test_every_bundled_network_has_narrow_cells():
         assert share[FULL_RADIUS] < 0.8 and share[RADII[0]] > 0.05
 
 
+def test_tiles_computed_when_needed_equal_the_whole_grid():
+    """The grid is computed tile by tile as the ego comes near; any tile equals the same cells
+    computed with the whole network at once."""
+    grid = match_grid(load_net(NETS / "carla/Town10HD.net.xml"))
+    fresh = build_match_grid(load_net(NETS / "carla/Town10HD.net.xml").lane_shape)
+    hi = fresh._hi.max(axis=0)
+    ny, nx = int((hi[1] - fresh.y0) // fresh.cell) + 1, int((hi[0] - fresh.x0) // fresh.cell) + 1
+    whole = fresh.codes(0, 0, ny, nx)
+    radii = np.array([*fresh.radii, FULL_RADIUS])
+    assert not fresh._tiles                       # nothing computed before it is asked for
+    rng = np.random.default_rng(7)
+    for i, j in zip(rng.integers(ny, size=3000), rng.integers(nx, size=3000), strict=True):
+        x, y = fresh.x0 + (j + 0.5) * fresh.cell, fresh.y0 + (i + 0.5) * fresh.cell
+        assert grid.radius(x, y) == fresh.radius(x, y) == radii[whole[i, j]]
+
+
 def _moves(net_path: Path, poses: list[tuple[float, float, float]], radius) -> list[tuple]:
     """Move a vehicle to each pose in turn (SUMO's moveToXY, keepRoute=2, search ``radius(x,
     y)`` m), one step each; SUMO's lane, lane position, lateral position and pose after each."""
