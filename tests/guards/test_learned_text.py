@@ -74,11 +74,13 @@ def test_the_shipped_weights_are_reproduced_by_the_training():
     model = shipped_model()
     data = training_data(load_banks(), model.seed)
     x = feature_matrix(data.texts)
-    # the optimiser's sums run through multi-threaded BLAS, whose order varies with the threads it
-    # gets: a retraining reproduces the shipped model to rounding, not to the bit
-    assert abs(cross_validate(x, data.labels, data.groups, model.l2).threshold - model.threshold) < 1e-6
+    # the optimiser's sums run through BLAS, whose order varies with the threads it gets and the
+    # CPU's kernel: a retraining reproduces the shipped model to rounding, not to the bit (with
+    # OpenBLAS's AVX-512 kernel instead of the AVX2 one it was trained with, the threshold moves by
+    # 4e-5, the bias by 2e-7 and no weight by more than 6e-6)
+    assert abs(cross_validate(x, data.labels, data.groups, model.l2).threshold - model.threshold) < 1e-4
     weights, bias = fit(x, data.labels, model.l2)
-    assert np.allclose(weights, model.weights, rtol=1e-4, atol=1e-6) and abs(bias - model.bias) < 1e-4
+    assert np.allclose(weights, model.weights, rtol=1e-4, atol=2e-5) and abs(bias - model.bias) < 1e-4
 
 
 def test_training_is_deterministic_from_the_seed():
