@@ -20,9 +20,10 @@ wherever, for the point moved to,
   (``1.05 - r / 6.4`` unambiguous, ``-4.45`` ambiguous), so the best lane is within ``r`` and,
   being unambiguous, keeps SUMO's tie order.
 
-:func:`match_grid` checks both on a grid of ``CELL`` m cells for every point of a cell at once
-(distances change by at most the cell's half-diagonal across it, with a 1 cm margin), for each of
-``RADII`` in turn, and :meth:`MatchGrid.radius` gives the narrowest radius that holds at a point
+:class:`MatchGrid` checks both on a grid of ``CELL`` m cells for every point of a cell at once
+(a lane's least distance over the cell exactly, its largest bounded; a 1 cm margin), for each of
+``RADII``, tile by tile as the ego comes near, and :meth:`MatchGrid.radius` gives the narrowest
+radius that holds at a point
 (``FULL_RADIUS`` where none does: off the roads, at a lane's end with nothing beside it). Every
 lane the proof names is a candidate SUMO sees: a lane a passenger car may use with a shape of
 non-zero length (``RoadNet.lane_shape``: normal and junction-internal lanes).
@@ -107,14 +108,18 @@ class MatchGrid:
             out[near[k] & inside[k]] = k
         return out
 
+    @property
+    def extent(self) -> tuple[int, int]:
+        """(rows, columns) of cells that cover every lane with the search margin."""
+        hi = self._hi.max(axis=0)
+        return int((hi[1] - self.y0) // self.cell) + 1, int((hi[0] - self.x0) // self.cell) + 1
+
     def share(self) -> dict[float, float]:
         """Share of the network's cells per radius (FULL_RADIUS included), all tiles computed
         (for tests and reports)."""
         if not self.shapes:
             return {FULL_RADIUS: 1.0}
-        hi = self._hi.max(axis=0)
-        ny, nx = int((hi[1] - self.y0) // self.cell) + 1, int((hi[0] - self.x0) // self.cell) + 1
-        codes = self.codes(0, 0, ny, nx)
+        codes = self.codes(0, 0, *self.extent)
         out = {r: float(np.count_nonzero(codes == k)) / codes.size for k, r in enumerate(self.radii)}
         out[FULL_RADIUS] = float(np.count_nonzero(codes >= len(self.radii))) / codes.size
         return out

@@ -49,8 +49,7 @@ def test_tiles_computed_when_needed_equal_the_whole_grid():
     computed with the whole network at once."""
     grid = match_grid(load_net(NETS / "carla/Town10HD.net.xml"))
     fresh = build_match_grid(load_net(NETS / "carla/Town10HD.net.xml").lane_shape)
-    hi = fresh._hi.max(axis=0)
-    ny, nx = int((hi[1] - fresh.y0) // fresh.cell) + 1, int((hi[0] - fresh.x0) // fresh.cell) + 1
+    ny, nx = fresh.extent
     whole = fresh.codes(0, 0, ny, nx)
     radii = np.array([*fresh.radii, FULL_RADIUS])
     assert not fresh._tiles                       # nothing computed before it is asked for
