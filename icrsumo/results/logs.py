@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import math
+import operator
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -249,6 +250,26 @@ class _LogChecker(DocChecker):
                          "write episode logs with icrsumo.results.logs")
 
 
+_INTS, _NUMBERS = frozenset((int,)), frozenset((int, float))
+
+
+def _column(rd: _LogChecker, raw: list, col: str, integers: bool) -> tuple:
+    """The values of step column ``col`` read from its JSON list ``raw``: integers, or finite
+    numbers as floats. A column of plain ints (and floats) is read at once; anything else goes
+    value by value through the checker, which names the first bad entry."""
+    if set(map(type, raw)) <= (_INTS if integers else _NUMBERS):
+        if integers:
+            return tuple(raw)
+        try:
+            values = tuple(map(float, raw))
+        except OverflowError:  # an int too large for a float: the checker names it
+            values = None
+        if values is not None and all(map(math.isfinite, values)):
+            return values
+    conv = rd.integer if integers else rd.number
+    return tuple(conv(v, f"steps.{col}[{i}]") for i, v in enumerate(raw))
+
+
 def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
     """Build an :class:`EpisodeLog` from :func:`log_to_dict` output, checking every key.
     ``source`` (a file name) is used in error messages."""
@@ -283,23 +304,26 @@ def log_from_dict(d: Any, source: str = _DEFAULT_SOURCE) -> EpisodeLog:
     cols: dict[str, tuple] = {}
     for col, dec in STEP_COLUMNS.items():
         raw = rd.lst(rd.key(steps, col, "steps"), f"steps.{col}")
-        conv = rd.integer if dec is None else rd.number
-        cols[col] = tuple(conv(v, f"steps.{col}[{i}]") for i, v in enumerate(raw))
+        cols[col] = _column(rd, raw, col, dec is None)
     n = len(cols["t"])
     for col, values in cols.items():
         if len(values) != n and not (col in OPTIONAL_COLUMNS and not values):
             raise rd.fail(f"steps.{col}", f"has {len(values)} entries but steps.t has {n}",
                           "all step columns must have equal length")
-    for i in range(1, n):
-        if cols["t"][i] <= cols["t"][i - 1]:
-            raise rd.fail(f"steps.t[{i}]", f"time {cols['t'][i]} is not after {cols['t'][i - 1]}",
-                          "step times must increase")
-        if cols["progress"][i] < cols["progress"][i - 1]:
-            raise rd.fail(f"steps.progress[{i}]", "progress decreased",
-                          "progress is the furthest route position reached, so it never decreases")
-    for i, v in enumerate(cols["outside"]):
-        if not 0 <= v <= _OUTSIDE_MAX:
-            raise rd.fail(f"steps.outside[{i}]", f"expected 0 to {_OUTSIDE_MAX}, got {short(v)}")
+    t, progress = cols["t"], cols["progress"]
+    if not (all(map(operator.lt, t, t[1:])) and all(map(operator.le, progress, progress[1:]))):
+        for i in range(1, n):
+            if t[i] <= t[i - 1]:
+                raise rd.fail(f"steps.t[{i}]", f"time {t[i]} is not after {t[i - 1]}",
+                              "step times must increase")
+            if progress[i] < progress[i - 1]:
+                raise rd.fail(f"steps.progress[{i}]", "progress decreased",
+                              "progress is the furthest route position reached, so it never decreases")
+    outside = cols["outside"]
+    if outside and not (min(outside) >= 0 and max(outside) <= _OUTSIDE_MAX):
+        for i, v in enumerate(outside):
+            if not 0 <= v <= _OUTSIDE_MAX:
+                raise rd.fail(f"steps.outside[{i}]", f"expected 0 to {_OUTSIDE_MAX}, got {short(v)}")
     raw_route = rd.key(d, "route")
     if not isinstance(raw_route, list) or (n and not raw_route):
         raise rd.fail("route", "expected a non-empty list of [x, y] points")

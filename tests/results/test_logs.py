@@ -126,6 +126,12 @@ def _bad(mutate) -> InputError:
     (lambda d: d["steps"]["speed"].__setitem__(1, "fast"), "steps.speed[1]"),
     (lambda d: d["steps"]["outside"].__setitem__(2, 16), "steps.outside[2]"),
     (lambda d: d["steps"]["instruction"].__setitem__(0, 1.5), "steps.instruction[0]"),
+    (lambda d: d["steps"]["instruction"].__setitem__(1, True), "steps.instruction[1]"),
+    (lambda d: d["steps"]["speed"].__setitem__(2, False), "steps.speed[2]"),
+    (lambda d: d["steps"]["x"].__setitem__(1, 10 ** 400), "steps.x[1]"),
+    (lambda d: d["steps"]["y"].__setitem__(2, float("-inf")), "steps.y[2]"),
+    (lambda d: d["steps"]["yaw"].__setitem__(0, float("nan")), "steps.yaw[0]"),
+    (lambda d: d["steps"]["outside"].__setitem__(1, -1), "steps.outside[1]"),
     (lambda d: d["steps"]["x"].pop(), "steps.x"),
     (lambda d: d["steps"]["t"].__setitem__(2, 0.2), "steps.t[2]"),
     (lambda d: d["steps"]["progress"].__setitem__(2, 1.0), "steps.progress[2]"),
@@ -140,6 +146,25 @@ def test_malformed_log_names_the_key(mutate, place):
     assert err.file == "ep.json"
     assert err.place == place
     assert place in str(err)
+
+
+def test_columns_of_other_number_types_read_as_before():
+    """A column read at once (plain ints and floats) and one read value by value (a float or int
+    subclass in it) give the same values, all floats in number columns and ints in integer ones."""
+    d = log_to_dict(make_log())
+    plain = log_from_dict(copy.deepcopy(d))
+    odd = copy.deepcopy(d)
+    odd["steps"]["x"] = [np.float64(v) for v in odd["steps"]["x"]]
+    odd["steps"]["speed"] = [int(v) if float(v).is_integer() else v for v in odd["steps"]["speed"]]
+    odd["steps"]["outside"] = [_Int(v) for v in odd["steps"]["outside"]]
+    slow = log_from_dict(odd)
+    assert slow == plain
+    assert all(type(v) is float for v in slow.x + slow.speed)
+    assert [type(v) for v in plain.instruction] == [int] * len(plain.instruction)
+
+
+class _Int(int):
+    """An int subclass: read value by value, as before the whole-column read."""
 
 
 def test_malformed_text():
