@@ -115,6 +115,16 @@ def test_only_new_rows_are_multiplied_and_the_bits_stay_the_dense_graphs(exporte
             got = graph.image(a, mm, x, before=before)
             assert got.acc.tobytes() == _dense_image(a, mm, x).tobytes()
             before = got
+        # a change that only erases: the one patch that changed is empty now, so the stem
+        # multiplies no row at all
+        x = bev[:1].copy()
+        i, j = np.argwhere(graph.drawn(x)[0])[0]
+        before = graph.image(a, mm, x)
+        x = x.copy()                                # the Image keeps the array it was given
+        x[0, :, 4 * i:4 * i + 4, 4 * j:4 * j + 4] = 0
+        got = graph.image(a, mm, x, before=before)
+        assert got is not before
+        assert got.acc.tobytes() == _dense_image(a, mm, x).tobytes()
 
 
 def test_fuse_is_the_three_stages_in_one_call(exported):

@@ -24,7 +24,6 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.lib.stride_tricks import as_strided
 
 #: partial sums of a float32 product stay below this (the exporter checks every layer)
 EXACT_LIMIT = 1 << 24
@@ -69,12 +68,23 @@ def requant(acc: np.ndarray, m: np.ndarray, lo: int, hi: int) -> np.ndarray:
 
 def patches4(bev: np.ndarray) -> np.ndarray:
     """``(B, C, H, W)`` uint8 -> ``(B*H/4*W/4, C*16)`` non-overlapping 4x4 patches, columns in
-    the order (c, kh, kw) of a torch weight ``(C_out, C, 4, 4)`` flattened. Each patch row's 4
-    bytes move as one uint32 (4x fewer elements to copy)."""
+    the order (c, kh, kw) of a torch weight ``(C_out, C, 4, 4)`` flattened."""
+    b, c, h, w = bev.shape
+    return _patch_bytes(patch_words(bev)).reshape(b * (h // 4) * (w // 4), c * 16)
+
+
+def patch_words(bev: np.ndarray) -> np.ndarray:
+    """``(B, C, H, W)`` uint8 -> a view ``(B, H/4, W/4, C, 4)`` uint32 of its 4x4 patches: each
+    patch row's 4 bytes as one uint32 (4x fewer elements to move). ``_patch_bytes`` of any
+    selection of its patches gives their rows of :func:`patches4`."""
     b, c, h, w = bev.shape
     words = np.ascontiguousarray(bev, dtype=np.uint8).view(np.uint32)      # (B, C, H, W/4)
-    p = words.reshape(b, c, h // 4, 4, w // 4).transpose(0, 2, 4, 1, 3)    # (B, i, j, c, kh)
-    return np.ascontiguousarray(p).view(np.uint8).reshape(b * (h // 4) * (w // 4), c * 16)
+    return words.reshape(b, c, h // 4, 4, w // 4).transpose(0, 2, 4, 1, 3)  # (B, i, j, c, kh)
+
+
+def _patch_bytes(words: np.ndarray) -> np.ndarray:
+    """Patches ``(..., C, 4)`` uint32 -> their bytes ``(..., C*16)`` uint8, contiguous."""
+    return np.ascontiguousarray(words).view(np.uint8).reshape(*words.shape[:-2], words.shape[-2] * 16)
 
 
 def im2col3s2(rows: np.ndarray, b: int, h: int, w: int) -> np.ndarray:
@@ -90,7 +100,9 @@ def windows3s2(rows: np.ndarray, b: int, h: int, w: int) -> np.ndarray:
     xp = np.zeros((b, h + 2, w + 2, c), dtype=rows.dtype)
     xp[:, 1:-1, 1:-1] = rows.reshape(b, h, w, c)
     s0, s1, s2, s3 = xp.strides
-    return as_strided(xp, (b, h // 2, w // 2, 3, 3, c), (s0, 2 * s1, 2 * s2, s1, s2, s3), writeable=False)
+    view = np.ndarray((b, h // 2, w // 2, 3, 3, c), xp.dtype, xp, 0, (s0, 2 * s1, 2 * s2, s1, s2, s3))
+    view.flags.writeable = False
+    return view
 
 
 def fuse(a: Mapping[str, np.ndarray], mm: Engine, bev: np.ndarray, lang: list[LangState],
@@ -166,8 +178,7 @@ def image(a: Mapping[str, np.ndarray], mm: Engine, bev: np.ndarray, bg: Backgrou
         if 2 * n > changed.size:
             changed = None
     old = (before.stem, before.c2, before.acc) if changed is not None else (None, None, None)
-    p = patches4(bev).reshape(b, h // 4, w // 4, -1)
-    x = _rows(a, mm, p, empty, changed, old[0], "stem", bg.stem)
+    x = _rows(a, mm, patch_words(bev), empty, changed, old[0], "stem", bg.stem, packed=True)
     empty, changed = _windows_all(empty), _windows_any(changed)
     x2 = _rows(a, mm, windows3s2(x, b, h // 4, w // 4), empty, changed, old[1], "c2", bg.c2)
     empty, changed = _windows_all(empty), _windows_any(changed)
@@ -205,16 +216,20 @@ def _windows_any(changed: np.ndarray | None) -> np.ndarray | None:
 
 def _rows(a: Mapping[str, np.ndarray], mm: Engine, cols: np.ndarray, empty: np.ndarray,
           changed: np.ndarray | None, before: np.ndarray | None, layer: str, bg_row: np.ndarray,
-          requantise: bool = True) -> np.ndarray:
+          requantise: bool = True, packed: bool = False) -> np.ndarray:
     """The output rows (B, h, w, C') of ``layer`` whose inputs are ``cols`` (B, h, w, ...), one
-    output row's inputs each: an ``empty`` row is ``bg_row``; given ``changed`` and ``before``,
-    a row not changed is ``before``'s; the others are multiplied (and requantised for the next
-    layer, or left as the raw accumulator)."""
+    output row's inputs each (``packed``: :func:`patch_words`' view, whose rows are their bytes):
+    an ``empty`` row is ``bg_row``; given ``changed`` and ``before``, a row not changed is
+    ``before``'s; the others are multiplied (and requantised for the next layer, or left as the
+    raw accumulator)."""
     b, h, w = empty.shape
     todo = ~empty if changed is None else changed & ~empty
     dense = changed is None and bool(todo.all())
-    k = math.prod(cols.shape[3:])                  # one output row's inputs
-    acc = mm(cols.reshape(b * h * w, k) if dense else cols[todo].reshape(-1, k), layer)
+    x = cols if dense else cols[todo]
+    if packed:
+        x = _patch_bytes(x)
+    rows, k = (b * h * w, math.prod(x.shape[3:])) if dense else (len(x), math.prod(x.shape[1:]))
+    acc = mm(x.reshape(rows, k), layer)
     if requantise:
         nxt = PRODUCTS[PRODUCTS.index(layer) + 1]
         acc = requant(acc, a[f"{layer}.m"], 0, float(a[f"{nxt}.top"]))
@@ -236,14 +251,19 @@ def modulated(a: Mapping[str, np.ndarray], mm: Engine, acc: np.ndarray,
     (B, h, w, C3), one :class:`LangState` per row -> the fully connected layer's activations
     (B, F) float32 (integers 0..``mlp0.top``)."""
     b, h, w, c3 = acc.shape
-    film_m = np.stack([s.film_m for s in lang])[:, None, :]
-    film_b = np.stack([s.film_b for s in lang])[:, None, :]
+    film_m = _rowwise([s.film_m for s in lang])[:, None, :]
+    film_b = _rowwise([s.film_b for s in lang])[:, None, :]
     y = np.multiply(acc.reshape(b, h * w, c3), film_m, dtype=np.float32)
     np.add(y, film_b, out=y)
     np.rint(y, out=y)
     np.clip(y, 0, float(a["c4.top"]), out=y)
     x = requant(mm(im2col3s2(y.reshape(b * h * w, c3), b, h, w), "c4"), a["c4.m"], 0, float(a["fc.top"]))
     return requant(mm(x.reshape(b, -1), "fc"), a["fc.m"], 0, float(a["mlp0.top"]))
+
+
+def _rowwise(rows: list[np.ndarray]) -> np.ndarray:
+    """``np.stack(rows)``; one row as a view (a single call's text)."""
+    return rows[0][None] if len(rows) == 1 else np.stack(rows)
 
 
 def heads(a: Mapping[str, np.ndarray], mm: Engine, x: np.ndarray, lang: list[LangState],
@@ -255,7 +275,7 @@ def heads(a: Mapping[str, np.ndarray], mm: Engine, x: np.ndarray, lang: list[Lan
     sp = np.divide(np.asarray(speed, np.float32), np.float32(10.0), dtype=np.float32)
     st = np.divide(np.asarray(stopped, np.float32), np.float32(5.0), dtype=np.float32)
     hid = np.multiply(mm(x, "mlp0"), a["mlp0.k"], dtype=np.float32)
-    np.add(hid, np.stack([s.mlp_l for s in lang]), out=hid)
+    np.add(hid, _rowwise([s.mlp_l for s in lang]), out=hid)
     np.add(hid, sp[:, None] * a["mlp0.wsp"], out=hid)
     np.add(hid, st[:, None] * a["mlp0.wst"], out=hid)
     x = requant(hid, a["mlp0.m"], 0, float(a["mlp1.top"]))
