@@ -103,7 +103,7 @@ class MatchGrid:
         near = np.zeros((k_full, ny, nx), bool)     # (A): a lane in [3.2, r] m
         inside = np.zeros((k_full, ny, nx), bool)   # (B): an unambiguous lane nearer than r - 3.52
         for n in np.flatnonzero(hit):
-            _lane(self.shapes[n], self, i0, j0, ny, nx, near, inside)
+            _lane(self, n, i0, j0, ny, nx, near, inside)
         for k in range(k_full - 1, -1, -1):
             out[near[k] & inside[k]] = k
         return out
@@ -147,17 +147,17 @@ def _span(lo: float, hi: float, origin: float, cell: float, first: int, end: int
     return max(int((lo - origin) // cell), first), min(int((hi - origin) // cell) + extra, end)
 
 
-def _lane(s: np.ndarray, g: MatchGrid, gi0: int, gj0: int, ny: int, nx: int,
+def _lane(g: MatchGrid, n: int, gi0: int, gj0: int, ny: int, nx: int,
           near: np.ndarray, inside: np.ndarray) -> None:
     """Mark in ``near`` and ``inside`` ((len(radii), ny, nx), the cells from row ``gi0``,
-    column ``gj0``) where lane ``s`` satisfies (A) and (B).
+    column ``gj0``) where lane ``n`` of ``g`` satisfies (A) and (B).
 
     Per cell: the lane's least distance over the cell, exact where the lane does not cross it
     (the nearest of the cell's corners to the lane and of the lane's vertices to the cell), and
     a bound on its largest (the farthest corner + half the diagonal)."""
-    cell, x0, y0, margin = g.cell, g.x0, g.y0, g.margin
+    s, cell, x0, y0, margin = g.shapes[n], g.cell, g.x0, g.y0, g.margin
     half, spread = 0.5 * cell, cell * np.sqrt(0.5)
-    slo, shi = s.min(axis=0) - margin, s.max(axis=0) + margin
+    slo, shi = g._lo[n], g._hi[n]                  # the lane's box with the search margin
     j0, j1 = _span(slo[0], shi[0], x0, cell, gj0, gj0 + nx)
     i0, i1 = _span(slo[1], shi[1], y0, cell, gi0, gi0 + ny)
     if j0 >= j1 or i0 >= i1:

@@ -225,11 +225,10 @@ def _rows(a: Mapping[str, np.ndarray], mm: Engine, cols: np.ndarray, empty: np.n
     b, h, w = empty.shape
     todo = ~empty if changed is None else changed & ~empty
     dense = changed is None and bool(todo.all())
-    x = cols if dense else cols[todo]
+    x = cols if dense else cols[todo]              # (B, h, w, ...) or (rows, ...)
     if packed:
         x = _patch_bytes(x)
-    rows, k = (b * h * w, math.prod(x.shape[3:])) if dense else (len(x), math.prod(x.shape[1:]))
-    acc = mm(x.reshape(rows, k), layer)
+    acc = mm(x.reshape(-1, math.prod(x.shape[3 if dense else 1:])), layer)
     if requantise:
         nxt = PRODUCTS[PRODUCTS.index(layer) + 1]
         acc = requant(acc, a[f"{layer}.m"], 0, float(a[f"{nxt}.top"]))
