@@ -136,6 +136,23 @@ def test_rotating_the_ego_rotates_the_map(grid):
     assert (np.rot90(wa, k=-1) != wb).mean() < 0.02
 
 
+def test_a_standing_ego_reuses_the_static_layers_exactly(grid):
+    """The static layers of an unchanged pose come from the render before (no warp): every frame
+    equals a fresh renderer's, whatever the lights and traffic drew on the frame before."""
+    net, _ = grid
+    r = BevRenderer(net)
+    tid, _lid, pose = _tl_approach(net, r, 20.0)
+    n = 1 + max(link for t, link, _ in r.tl_segments if t == tid)
+    veh = np.array([[*_offset(pose, 10), pose[2], 4.5, 1.9]])
+    moved = (*_offset(pose, 1.0), pose[2])
+    calls = [(pose, veh, {tid: "r" * n}), (pose, NO_VEH, {}), (pose, veh, {tid: "G" * n}),
+             (moved, NO_VEH, {}), (pose, NO_VEH, {tid: "r" * n}), ((*pose[:2], pose[2] + 1e-9), NO_VEH, {})]
+    frames = [r.render(p, EGO_SIZE, v, NO_PED, st) for p, v, st in calls]
+    for (p, v, st), got in zip(calls, frames):
+        assert got.tobytes() == BevRenderer(net).render(p, EGO_SIZE, v, NO_PED, st).tobytes()
+    assert frames[3].tobytes() != frames[1].tobytes()
+
+
 def _tl_approach(net, r, before: float = 20.0):
     """An incoming car lane of a traffic light in icr_grid and the ego pose ``before`` m ahead of
     its end."""

@@ -36,6 +36,8 @@ from icrsumo.world.networks import EGO_VCLASS, RoadNet
 #: raster channels, in order
 CHANNELS = ("drivable", "markings", "vehicles", "pedestrians", "ego", "stop", "go")
 _DRIVABLE, _MARKINGS, _VEHICLES, _PEDESTRIANS, _EGO, _STOP, _GO = range(len(CHANNELS))
+#: the channels drawn from the static canvas, in its order
+_STATIC = np.array([_DRIVABLE, _MARKINGS, _STOP])
 
 #: fixed-point bits for cv2 drawing (sub-pixel accurate polygons and lines)
 _SHIFT = 4
@@ -176,6 +178,9 @@ class BevRenderer:
         self._tl_cache: dict[tuple[int, str], np.ndarray] = {}
         self._tl_draw_cache: dict[tuple, tuple[np.ndarray, tuple]] = {}
         self._ego_cache: dict[tuple[float, float], np.ndarray] = {}
+        #: the ego pose (x, y, yaw) of the last render and its static layers (3, H, W)
+        self._static_pose: tuple[float, float, float] | None = None
+        self._static = np.zeros((3, spec.height, spec.width), dtype=np.uint8)
         self._view_radius = spec.view_radius_m
         #: per light: centre x, y and the squared visibility radius (view reach + its extent)
         lims = ((self._view_radius + self._tl_radius) ** 2).tolist()  # array square: x * x
@@ -397,13 +402,18 @@ class BevRenderer:
         # static layers: output pixel (col, row) -> canvas (col, row), one warp for all three
         tx = (ex - self.x0) / mpp + r0 * c - c0 * s
         ty = (self.y1 - ey) / mpp - r0 * s - c0 * c
-        warped = cv2.warpAffine(
-            self.canvas, np.array([[s, -c, tx], [c, s, ty]]), (sp.width, sp.height),
-            flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
-            borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0),
-        )
         out = np.zeros((len(CHANNELS), sp.height, sp.width), dtype=np.uint8)
-        cv2.split(warped, [out[_DRIVABLE], out[_MARKINGS], out[_STOP]])
+        if self._static_pose == (ex, ey, yaw):
+            # an ego standing still: the static layers of the render before, unchanged
+            out[_STATIC] = self._static
+        else:
+            warped = cv2.warpAffine(
+                self.canvas, np.array([[s, -c, tx], [c, s, ty]]), (sp.width, sp.height),
+                flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
+                borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0),
+            )
+            cv2.split(warped, [out[_DRIVABLE], out[_MARKINGS], out[_STOP]])
+            self._static_pose, self._static = (ex, ey, yaw), out[_STATIC].copy()
         # world (x, y) m -> ego-frame fixed-point (col, row): p @ lin + off
         a, b = s / mpp * _ONE, c / mpp * _ONE
         lin = np.array([[a, -b], [-b, -a]])
