@@ -180,7 +180,7 @@ class BevRenderer:
         self._ego_cache: dict[tuple[float, float], np.ndarray] = {}
         #: the ego pose (x, y, yaw) of the last render and its static layers (3, H, W)
         self._static_pose: tuple[float, float, float] | None = None
-        self._static = np.zeros((3, spec.height, spec.width), dtype=np.uint8)
+        self._static: np.ndarray | None = None
         self._view_radius = spec.view_radius_m
         #: per light: centre x, y and the squared visibility radius (view reach + its extent)
         lims = ((self._view_radius + self._tl_radius) ** 2).tolist()  # array square: x * x
@@ -399,14 +399,14 @@ class BevRenderer:
         ex, ey, yaw = float(ego[0]), float(ego[1]), float(ego[2])
         c, s = math.cos(yaw), math.sin(yaw)
         r0, c0 = sp.ego_row, sp.ego_col
-        # static layers: output pixel (col, row) -> canvas (col, row), one warp for all three
-        tx = (ex - self.x0) / mpp + r0 * c - c0 * s
-        ty = (self.y1 - ey) / mpp - r0 * s - c0 * c
         out = np.zeros((len(CHANNELS), sp.height, sp.width), dtype=np.uint8)
         if self._static_pose == (ex, ey, yaw):
             # an ego standing still: the static layers of the render before, unchanged
             out[_STATIC] = self._static
         else:
+            # static layers: output pixel (col, row) -> canvas (col, row), one warp for all three
+            tx = (ex - self.x0) / mpp + r0 * c - c0 * s
+            ty = (self.y1 - ey) / mpp - r0 * s - c0 * c
             warped = cv2.warpAffine(
                 self.canvas, np.array([[s, -c, tx], [c, s, ty]]), (sp.width, sp.height),
                 flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
