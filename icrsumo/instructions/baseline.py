@@ -24,6 +24,11 @@ Layout along the route (positions in m):
 - notices beside the instructions: traffic lights and stop signs 40 m before the junction,
   pedestrians at signalised or stop-controlled junctions with crossings.
 
+For training data only (``icrsumo collect --vary-leads``), a second Generator may draw each
+junction maneuver's announcement distances from :data:`VARIED_LEADS` instead (the fixed ones
+lie inside its ranges), so that a network sees a turn's text arrive before other openings than
+the one it names; the benchmark's own sequences never do.
+
 Phrasings are drawn from the baseline bank with a Generator seeded by the route seed; distances
 are rounded to 10 m. With a LangAuto-style bank (``--baseline-bank``, :mod:`.baseline_bank`)
 the text of every type it maps is then replaced by one of its phrasings, drawn by a second
@@ -33,7 +38,7 @@ distances, notices) and icrsumo's own draws stay exactly those without the bank.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -62,6 +67,35 @@ LANE_CHANGE_M = 30.0
 HIGHWAY_EXIT_FAR_M = 150.0
 #: second seed word of the Generator that draws --baseline-bank phrasings ("LANG")
 LANGAUTO_STREAM = 0x4C414E47
+
+
+
+class Leads(NamedTuple):
+    """Announcement distances (m before a junction maneuver): ``single`` instruction, two-stage
+    ``far`` and ``near`` ones, a highway exit's far one, and ``next_room``, under which a junction
+    that follows the last one's exit is announced inside the last one."""
+
+    single: float
+    far: float
+    near: float
+    highway_far: float
+    next_room: float
+
+
+#: the benchmark's layout (module docstring)
+FIXED_LEADS = Leads(SINGLE_M, FAR_M, NEAR_M, HIGHWAY_EXIT_FAR_M, NEXT_ROOM_M)
+#: (low, high) m of each lead drawn uniformly per junction maneuver for varied-lead training data
+VARIED_LEADS: dict[str, tuple[float, float]] = {
+    "single": (20.0, 90.0), "far": (60.0, 120.0), "near": (10.0, 35.0),
+    "highway_far": (100.0, 200.0), "next_room": (20.0, 50.0)}
+#: second seed word of the Generator that draws varied leads ("LEAD")
+LEAD_STREAM = 0x4C454144
+
+
+def draw_leads(rng: np.random.Generator) -> Leads:
+    """One junction maneuver's leads, each uniform in its :data:`VARIED_LEADS` range (m)."""
+    return Leads(**{k: float(rng.uniform(*VARIED_LEADS[k])) for k in Leads._fields})
+
 
 _JUNCTION_TYPE = {"traffic_light": "traffic_light", "t_junction": "t_junction",
                   "crossroad": "intersection", "stop_sign": "stop_sign"}
@@ -131,12 +165,15 @@ def build_baseline(
     highway_spans: tuple[tuple[float, float], ...] = (),
     crossing_junctions: frozenset[str] = frozenset(),
     baseline_bank: BaselineBank | None = None,
+    lead_rng: np.random.Generator | None = None,
 ) -> InstructionSet:
     """The baseline sequence of one route (``length`` in m) from its sorted maneuvers.
 
     ``highway_spans``: (start, end) route positions (m) driven on a highway (for the
     follow_highway types); ``crossing_junctions``: junction ids with pedestrian crossings;
-    ``baseline_bank``: LangAuto's phrasings for the types it maps (None: icrsumo's own).
+    ``baseline_bank``: LangAuto's phrasings for the types it maps (None: icrsumo's own);
+    ``lead_rng``: draws each junction maneuver's :class:`Leads` (training data only; None: the
+    fixed layout). Phrasings are the same with and without it.
     """
     rng = np.random.default_rng(seed)
     user_rng = np.random.default_rng([seed, LANGAUTO_STREAM]) if baseline_bank is not None else None
@@ -175,24 +212,26 @@ def build_baseline(
                 b.add("lane_change", start + span * i / n, m.intent, m, side=side)
             cursor = start + span
             continue
-        if inside is not None and m.pos - exit_pos < NEXT_ROOM_M:
+        lead = FIXED_LEADS if lead_rng is None else draw_leads(lead_rng)
+        if inside is not None and m.pos - exit_pos < lead.next_room:
             # the junction follows the last one so closely that the driver must know it while
             # still in the last one: announce it there, NEXT_ROOM_M before it at the latest
-            cursor = max(inside, min(cursor, m.pos - NEXT_ROOM_M))
+            cursor = max(inside, min(cursor, m.pos - lead.next_room))
         elif m.pos < cursor:
             # the junction comes soon after the last maneuver: announce it as soon as the
             # last junction is left, at the latest 5 m before this one
             cursor = max(exit_pos, min(cursor, m.pos - AFTER_EXIT_M))
-        far_m = HIGHWAY_EXIT_FAR_M if m.kind == "highway_exit" else FAR_M
+        far_m = lead.highway_far if m.kind == "highway_exit" else lead.far
         far = _far_type(m)
-        announce = max(cursor, m.pos - (far_m if far else SINGLE_M))
+        announce = max(cursor, m.pos - (far_m if far else lead.single))
         if announce - cursor >= FOLLOW_GAP_M:
             follow(cursor, announce)
         if far is not None and m.pos - announce >= TWO_STAGE_ROOM_M:
             itype, slots = far
             b.add(itype, announce, m.intent, m, distance=m.pos - announce, **slots)
             itype, slots = _near_type(m)
-            b.add(itype, m.pos - NEAR_M, m.intent, m, **slots)
+            # at least 10 m after the far one (the fixed layout: 15 m or more)
+            b.add(itype, m.pos - min(lead.near, m.pos - announce - 10.0), m.intent, m, **slots)
         else:
             itype, slots = _near_type(m)
             b.add(itype, announce, m.intent, m, **slots)

@@ -106,16 +106,18 @@ def _highway_spans(sc: Scenario, net) -> tuple[tuple[float, float], ...]:
                  if i + 1 < len(cuts) and is_highway(net, e))
 
 
-def baseline_set(sc: Scenario, banks: Banks, seed: int,
-                 baseline_bank: BaselineBank | None = None) -> tuple[InstructionSet, list[Maneuver]]:
+def baseline_set(sc: Scenario, banks: Banks, seed: int, baseline_bank: BaselineBank | None = None,
+                 lead_rng: np.random.Generator | None = None) -> tuple[InstructionSet, list[Maneuver]]:
     """The baseline sequence of a scenario with phrasings drawn by ``seed`` (the protocol uses
     the route seed; data collection draws other phrasings), and the route's maneuvers;
-    ``baseline_bank``: LangAuto's phrasings for the types it maps."""
+    ``baseline_bank``: LangAuto's phrasings for the types it maps; ``lead_rng``: varied
+    announcement distances (training data only, :func:`.baseline.build_baseline`)."""
     net = load_net(sc.net)
     check_against_net(sc, net)
     maneuvers = extract_maneuvers(sc, net)
     return build_baseline(sc.route_id, sc.length, maneuvers, banks, seed,
-                          _highway_spans(sc, net), net.crossing_nodes, baseline_bank), maneuvers
+                          _highway_spans(sc, net), net.crossing_nodes, baseline_bank,
+                          lead_rng), maneuvers
 
 
 def _baseline_bank(opts: GenerateOptions) -> BaselineBank | None:

@@ -54,6 +54,7 @@ from icrsumo.core.resources import bundled_suites, suite_coords
 from icrsumo.core.types import Instruction
 from icrsumo.core.vocab import Intent, Termination
 from icrsumo.instructions.banks import load_banks
+from icrsumo.instructions.baseline import LEAD_STREAM
 from icrsumo.instructions.generate import baseline_set
 from icrsumo.world.convert import ConvertOptions, convert_routes, safe_name
 from icrsumo.world.scenario import find_scenarios, read_scenario
@@ -84,7 +85,10 @@ class CollectOptions:
     (:class:`icrsumo.learn.memory.InstructionMemory` on the driven ego's compass and speed:
     "Follow the road." once a turn or lane change is used up, or while a named distance is
     still ahead), so that the network is trained on the text it reads when it drives; off: the
-    active instruction (data collected before issue 47's memory)."""
+    active instruction (data collected before issue 47's memory). ``vary_leads``: each junction
+    maneuver's instructions arrive at distances drawn per maneuver
+    (:data:`icrsumo.instructions.baseline.VARIED_LEADS`) instead of the benchmark's fixed
+    layout, the same phrasings and perturbations otherwise."""
 
     suite: str = "train"
     passes: int = 3
@@ -95,6 +99,7 @@ class CollectOptions:
     limit: int = 0
     driver: str = ""
     memory: bool = True
+    vary_leads: bool = False
 
     def check(self) -> None:
         if self.suite in EVAL_SPLITS or _is_eval_file(self.suite):
@@ -314,7 +319,8 @@ def collect_episode(scenario_dir: str, pass_k: int, opts: CollectOptions) -> tup
     sc = read_scenario(Path(scenario_dir))
     rng = episode_rng(opts.seed, sc.route_id, pass_k)
     phrasing_seed = int(rng.integers(2**31))
-    iset, _ = baseline_set(sc, load_banks(None), phrasing_seed)
+    lead_rng = np.random.default_rng([phrasing_seed, LEAD_STREAM]) if opts.vary_leads else None
+    iset, _ = baseline_set(sc, load_banks(None), phrasing_seed, lead_rng=lead_rng)
     driver = None
     if opts.driver:
         from icrsumo.agents.registry import BUILTIN
@@ -391,6 +397,7 @@ def collect(opts: CollectOptions, out: Path, quiet: bool = False) -> dict:
                            f"use another {Field('out')} folder, or delete the damaged collect.json and "
                            "rerun with the same options (finished episodes are kept)").get("config", {})
         old.setdefault("memory", False)   # folders collected before the option existed
+        old.setdefault("vary_leads", False)
         if old != config:
             raise InputError(manifest_path, "config", "holds data of a different configuration",
                              f"use another {Field('out')} folder, or the same options")

@@ -178,3 +178,42 @@ def test_lane_changes_count_the_lanes_they_cross(converted):
         assert sorted(m.lanes for m in got) == sorted(abs(c.to_lane - c.from_lane) for c in changes)
         seen.update(m.lanes for m in got)
     assert 1 in seen
+
+
+def test_varied_leads_move_only_when_instructions_arrive():
+    """Training data's varied leads (``icrsumo collect --vary-leads``): the same instruction
+    types, intents and phrasings at other triggers, each drawn within VARIED_LEADS (m before its
+    junction), a distance instruction naming its own lead; the same Generator seed gives the same
+    sequence; without a Generator, the fixed layout."""
+    import numpy as np
+
+    from icrsumo.instructions.baseline import FIXED_LEADS, VARIED_LEADS, Leads
+
+    ms = [Maneuver("turn_left", 300.0, Intent.LEFT, "traffic_light", "j1", end=320.0),
+          Maneuver("straight", 700.0, Intent.STRAIGHT, "crossroad", "j2", end=715.0),
+          Maneuver("turn_right", 1100.0, Intent.RIGHT, "t_junction", "j3", end=1112.0),
+          Maneuver("turn_left", 1130.0, Intent.LEFT, "crossroad", "j4", end=1145.0)]
+    fixed = build_baseline("r", 1400.0, ms, load_banks(), 7).instructions
+    assert fixed == build_baseline("r", 1400.0, ms, load_banks(), 7, lead_rng=None).instructions
+    assert Leads(50.0, 80.0, 20.0, 150.0, NEXT_ROOM_M) == FIXED_LEADS
+    assert all(VARIED_LEADS[k][0] <= getattr(FIXED_LEADS, k) <= VARIED_LEADS[k][1] for k in Leads._fields)
+    runs = [build_baseline("r", 1400.0, ms, load_banks(), 7,
+                           lead_rng=np.random.default_rng([s, 1])).instructions for s in range(20)]
+    assert runs[0] == build_baseline("r", 1400.0, ms, load_banks(), 7,
+                                     lead_rng=np.random.default_rng([0, 1])).instructions
+    for ins in runs:
+        key = [(i.type, i.intent, i.maneuver_pos) for i in ins if i.maneuver_pos is not None]
+        assert key == [(i.type, i.intent, i.maneuver_pos) for i in fixed if i.maneuver_pos is not None]
+        assert [i.text for i in ins if i.distance is None] == [i.text for i in fixed if i.distance is None]
+        assert all(b.trigger > a.trigger for a, b in zip(ins, ins[1:]))
+        for i in ins:
+            if i.maneuver_pos is not None and i.maneuver_pos < 1110.0:  # not inside j3
+                assert 10.0 - 1e-6 <= i.maneuver_pos - i.trigger <= 120.0 + 1e-6, i
+            if i.distance is not None and i.maneuver_pos is not None:
+                assert abs(i.distance - (i.maneuver_pos - i.trigger)) <= 5.0 + 1e-6, i
+    leads = {round(i.maneuver_pos - i.trigger) for ins in runs for i in ins if i.maneuver_pos == 300.0}
+    assert len(leads) > 10   # the far and near announcements of one turn arrive all over
+    # j4, 18 m past j3's exit, is announced inside j3 (1 m past its entry) at least as often
+    # as the fixed layout does, and earlier whenever the drawn room reaches back there
+    inside = [next(i for i in ins if i.maneuver_pos == 1130.0).trigger for ins in runs]
+    assert all(1101.0 - 1e-6 <= t <= 1110.0 for t in inside)

@@ -121,3 +121,22 @@ def test_old_folders_resume_without_memory(converted, tmp_path):
     with pytest.raises(InputError, match="different configuration"):
         collect(CollectOptions(suite=str(converted["tiny"]), passes=1, every=5, limit=1), tmp_path,
                 quiet=True)
+
+
+def test_varied_leads_change_the_text_not_the_drive(one_route, converted, tmp_path):
+    """--vary-leads: the expert's clean drive and its labels are the same; which instruction each
+    frame records moves; a folder collected with it resumes only with it."""
+    fixed = np.load(io.BytesIO(collect_episode(one_route, 0, CollectOptions(every=2))[0]))
+    varied = np.load(io.BytesIO(collect_episode(one_route, 0, CollectOptions(every=2, vary_leads=True))[0]))
+    assert np.array_equal(fixed["waypoints"], varied["waypoints"])
+    assert np.array_equal(fixed["bev"], varied["bev"])
+    docs_f, docs_v = json.loads(str(fixed["instructions"])), json.loads(str(varied["instructions"]))
+    texts = lambda z, d: [d[i]["text"] if i >= 0 else "" for i in z["instruction"]]  # noqa: E731
+    assert texts(fixed, docs_f) != texts(varied, docs_v)
+    assert [d["type"] for d in docs_f] == [d["type"] for d in docs_v]
+    opts = CollectOptions(suite=str(converted["tiny"]), passes=1, every=5, limit=1, vary_leads=True)
+    collect(opts, tmp_path, quiet=True)
+    assert json.loads((tmp_path / "collect.json").read_text())["config"]["vary_leads"] is True
+    with pytest.raises(InputError, match="different configuration"):
+        collect(CollectOptions(suite=str(converted["tiny"]), passes=1, every=5, limit=1), tmp_path,
+                quiet=True)

@@ -33,6 +33,9 @@ def add(sub: Commands) -> None:
     c.add_argument("--no-memory", dest="memory", action="store_false",
                    help="record the active instruction on every frame, not the text the learned "
                    "agents' instruction memory hands their network (data as before issue 47)")
+    c.add_argument("--vary-leads", action="store_true",
+                   help="each junction's instructions arrive at distances drawn per junction "
+                   "(training data only) instead of the benchmark's fixed layout")
     c.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="worker processes (default: number of cores)")
     c.set_defaults(func=run)
@@ -45,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     opts = CollectOptions(suite=args.suite, passes=args.passes, seed=args.seed, every=args.every,
                           traffic=args.traffic, workers=args.workers, limit=args.limit,
-                          driver=args.driver or "", memory=args.memory)
+                          driver=args.driver or "", memory=args.memory,
+                          vary_leads=args.vary_leads)
     m = collect(opts, Path(args.out))
     print(f"{len(m['episodes'])} episodes, {m['frames']} frames in {time.perf_counter() - t0:.1f} s "
           f"-> {args.out}")
