@@ -69,7 +69,6 @@ HIGHWAY_EXIT_FAR_M = 150.0
 LANGAUTO_STREAM = 0x4C414E47
 
 
-
 class Leads(NamedTuple):
     """Announcement distances (m before a junction maneuver): ``single`` instruction, two-stage
     ``far`` and ``near`` ones, a highway exit's far one, and ``next_room``, under which a junction
@@ -215,7 +214,8 @@ def build_baseline(
         lead = FIXED_LEADS if lead_rng is None else draw_leads(lead_rng)
         if inside is not None and m.pos - exit_pos < lead.next_room:
             # the junction follows the last one so closely that the driver must know it while
-            # still in the last one: announce it there, NEXT_ROOM_M before it at the latest
+            # still in the last one: announce it there, lead.next_room before it at the latest
+            # (NEXT_ROOM_M in the fixed layout)
             cursor = max(inside, min(cursor, m.pos - lead.next_room))
         elif m.pos < cursor:
             # the junction comes soon after the last maneuver: announce it as soon as the
